@@ -1,0 +1,76 @@
+// What the motion-vector reader yields: one FrameRecord per decoded frame, in
+// display order, with the frame's motion vectors in slapse's pixel convention
+// (core/common/camera.h: pixel centres on integers).
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace slapse {
+
+enum class PictureType : uint8_t { kUnknown = 0, kI, kP, kB };
+// 'I', 'P', 'B' or '?'.
+char PictureTypeChar(PictureType type);
+inline bool IsAnchor(PictureType type) {
+  return type == PictureType::kI || type == PictureType::kP;
+}
+
+// Which reference a vector points to. FFmpeg's `source` is the reference list:
+// L0 (< 0) is the past anchor, L1 (> 0) the future anchor for MPEG-1/2/4 and
+// for H.264 streams without B-pyramids or multiple references.
+enum class RefDirection : int8_t { kPast = -1, kFuture = 1 };
+
+struct MotionVector {
+  // Block centre in the current frame, pixels (pixel-centre convention).
+  float x_px = 0, y_px = 0;
+  // Where the block's content sits in the reference frame, relative to the
+  // block centre: reference position minus current position, in pixels, with
+  // the codec's sub-pixel precision (FFmpeg motion_x / motion_scale).
+  float dx_px = 0, dy_px = 0;
+  uint8_t w_px = 16, h_px = 16;  // block size
+  RefDirection direction = RefDirection::kPast;
+};
+
+struct FrameRecord {
+  int64_t index = -1;        // display-order index of the decoded frame, from 0
+  double timestamp_s = 0.0;  // presentation time relative to the first frame
+  PictureType type = PictureType::kUnknown;
+  // Display index of the nearest anchor (I/P) before this frame, -1 if none.
+  // For P frames it is the frame their past vectors refer to.
+  int64_t prev_anchor_index = -1;
+  // B frames only: display index of the nearest anchor after this frame, the
+  // reference of the future vectors; -1 if the stream ended before it.
+  int64_t next_anchor_index = -1;
+  // Decoder reported damage (concealed errors) in this frame; its vectors are suspect.
+  bool corrupt = false;
+  std::vector<MotionVector> mvs;
+};
+
+// Facts about the stream known after opening (and refined while reading).
+struct StreamInfo {
+  std::string codec_name;   // FFmpeg decoder name, e.g. "mpeg2video", "h264"
+  std::string format_name;  // demuxer, e.g. "mpegts"
+  int width_px = 0, height_px = 0;
+  double fps = 0.0;            // nominal frame rate, 0 if unknown
+  int mv_precision_denom = 2;  // 2 = half-pel, 4 = quarter-pel
+  // Standard deviation of a correct MV's error (ALGORITHM.md §1): 0.25 px for
+  // half-pel codecs, 0.125 px for quarter-pel ones.
+  double mv_sigma_px() const { return mv_precision_denom >= 4 ? 0.125 : 0.25; }
+  int max_consecutive_b = 0;  // n_B seen so far: B frames between two anchors
+  // False for codecs whose FFmpeg decoder exports stale B-frame vectors (MPEG-4
+  // Part 2 and H.263 in FFmpeg 5.1 never write a B picture's motion table):
+  // the reader then yields B frames without vectors rather than garbage.
+  bool b_frame_mvs = true;
+};
+
+// Counters the reader keeps while decoding; errors here end the stream with DATA_LOSS.
+struct ReadStats {
+  int64_t packets = 0;
+  int64_t frames = 0;
+  int64_t packet_errors = 0;   // packets the decoder rejected
+  int64_t corrupt_frames = 0;  // frames decoded with concealed errors
+  std::string first_error;     // human-readable description of the first error
+};
+
+}  // namespace slapse

@@ -1,0 +1,356 @@
+#include "core/mv/mv_reader.h"
+
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <set>
+
+extern "C" {
+#include <libavcodec/avcodec.h>
+#include <libavformat/avformat.h>
+#include <libavutil/dict.h>
+#include <libavutil/motion_vector.h>
+}
+
+namespace slapse {
+namespace {
+
+constexpr int kAvioBufferBytes = 64 * 1024;
+
+std::string AvErrorString(int err) {
+  char buf[AV_ERROR_MAX_STRING_SIZE] = {0};
+  av_strerror(err, buf, sizeof(buf));
+  return buf;
+}
+
+PictureType ToPictureType(AVPictureType t) {
+  switch (t) {
+    case AV_PICTURE_TYPE_I:
+    case AV_PICTURE_TYPE_SI:
+      return PictureType::kI;
+    case AV_PICTURE_TYPE_P:
+    case AV_PICTURE_TYPE_SP:
+    case AV_PICTURE_TYPE_S:  // MPEG-4 GMC: predicted from the past anchor
+      return PictureType::kP;
+    case AV_PICTURE_TYPE_B:
+    case AV_PICTURE_TYPE_BI:
+      return PictureType::kB;
+    default:
+      return PictureType::kUnknown;
+  }
+}
+
+// Codecs whose FFmpeg decoders fill AV_FRAME_DATA_MOTION_VECTORS with export_mvs.
+const std::set<std::string>& MvCodecs() {
+  static const std::set<std::string> codecs = {"mpeg1video", "mpeg2video", "mpeg4",
+                                               "h263",       "h263p",      "h264"};
+  return codecs;
+}
+
+// Maps an avformat_open_input failure to a status a person can act on.
+Status OpenError(const std::string& url, int err) {
+  const std::string what = "cannot open '" + url + "': " + AvErrorString(err);
+  if (err == AVERROR(ENOENT)) return NotFoundError(what);
+  if (err == AVERROR_EXIT) return CancelledError(what + " (interrupted)");
+  if (err == AVERROR_INVALIDDATA || err == AVERROR_DEMUXER_NOT_FOUND ||
+      err == AVERROR_PROTOCOL_NOT_FOUND || err == AVERROR(EINVAL)) {
+    return InvalidArgumentError(what);
+  }
+  if (err == AVERROR(EACCES) || err == AVERROR(EPERM)) {
+    return Status(StatusCode::kPermissionDenied, what);
+  }
+  return UnavailableError(what);
+}
+
+}  // namespace
+
+char PictureTypeChar(PictureType type) {
+  switch (type) {
+    case PictureType::kI:
+      return 'I';
+    case PictureType::kP:
+      return 'P';
+    case PictureType::kB:
+      return 'B';
+    default:
+      return '?';
+  }
+}
+
+bool CodecExportsMotionVectors(const std::string& codec_name) {
+  return MvCodecs().count(codec_name) > 0;
+}
+
+MvReader::~MvReader() {
+  av_frame_free(&frame_);
+  av_packet_free(&pkt_);
+  avcodec_free_context(&dec_);
+  avformat_close_input(&fmt_);
+  if (avio_ != nullptr) {
+    av_freep(&avio_->buffer);
+    avio_context_free(&avio_);
+  }
+}
+
+int MvReader::InterruptTrampoline(void* opaque) {
+  auto* self = static_cast<MvReader*>(opaque);
+  return self->options_.interrupt && self->options_.interrupt() ? 1 : 0;
+}
+
+int MvReader::ReadTrampoline(void* opaque, uint8_t* buf, int size) {
+  auto* self = static_cast<MvReader*>(opaque);
+  const int n = self->source_->Read(buf, size);
+  if (n > 0) return n;
+  return n == 0 ? AVERROR_EOF : AVERROR(EIO);
+}
+
+StatusOr<std::unique_ptr<MvReader>> MvReader::Open(const std::string& url,
+                                                   const MvReaderOptions& options) {
+  if (url.empty()) return InvalidArgumentError("empty input path or URL");
+  return OpenImpl(std::unique_ptr<MvReader>(new MvReader()), url, options);
+}
+
+StatusOr<std::unique_ptr<MvReader>> MvReader::Open(std::unique_ptr<ByteSource> source,
+                                                   const MvReaderOptions& options) {
+  if (source == nullptr) return InvalidArgumentError("null byte source");
+  std::unique_ptr<MvReader> reader(new MvReader());
+  reader->source_ = std::move(source);
+  auto* buffer = static_cast<unsigned char*>(av_malloc(kAvioBufferBytes));
+  if (buffer == nullptr) return ResourceExhaustedError("out of memory for the I/O buffer");
+  reader->avio_ = avio_alloc_context(buffer, kAvioBufferBytes, /*write_flag=*/0, reader.get(),
+                                     &MvReader::ReadTrampoline, nullptr, nullptr);
+  if (reader->avio_ == nullptr) {
+    av_free(buffer);
+    return ResourceExhaustedError("out of memory for the I/O context");
+  }
+  return OpenImpl(std::move(reader), "<byte stream>", options);
+}
+
+StatusOr<std::unique_ptr<MvReader>> MvReader::OpenImpl(std::unique_ptr<MvReader> r,
+                                                       const std::string& url,
+                                                       const MvReaderOptions& options) {
+  r->options_ = options;
+  r->fmt_ = avformat_alloc_context();
+  if (r->fmt_ == nullptr) return ResourceExhaustedError("out of memory for the format context");
+  r->fmt_->interrupt_callback.callback = &MvReader::InterruptTrampoline;
+  r->fmt_->interrupt_callback.opaque = r.get();
+  if (r->avio_ != nullptr) {
+    r->fmt_->pb = r->avio_;
+    r->fmt_->flags |= AVFMT_FLAG_CUSTOM_IO;
+  }
+
+  const AVInputFormat* iformat = nullptr;
+  if (!options.format.empty()) {
+    iformat = av_find_input_format(options.format.c_str());
+    if (iformat == nullptr) {
+      return InvalidArgumentError("unknown input format '" + options.format + "'");
+    }
+  }
+  AVDictionary* fmt_opts = nullptr;
+  for (const auto& [k, v] : options.format_options) av_dict_set(&fmt_opts, k.c_str(), v.c_str(), 0);
+  const std::string open_url = r->avio_ != nullptr ? "" : url;
+  int err = avformat_open_input(&r->fmt_, open_url.c_str(), iformat, &fmt_opts);
+  av_dict_free(&fmt_opts);
+  if (err < 0) return OpenError(url, err);  // avformat_open_input freed fmt_
+
+  err = avformat_find_stream_info(r->fmt_, nullptr);
+  if (err < 0) {
+    if (err == AVERROR_EXIT) return CancelledError("interrupted while probing '" + url + "'");
+    return InvalidArgumentError("cannot read stream info of '" + url + "': " + AvErrorString(err));
+  }
+  const int si = av_find_best_stream(r->fmt_, AVMEDIA_TYPE_VIDEO, -1, -1, nullptr, 0);
+  if (si < 0) return InvalidArgumentError("'" + url + "' has no video stream");
+  r->stream_index_ = si;
+  AVStream* st = r->fmt_->streams[si];
+  const AVCodecParameters* par = st->codecpar;
+  const AVCodecDescriptor* desc = avcodec_descriptor_get(par->codec_id);
+  const std::string codec_name = desc != nullptr ? desc->name : "unknown";
+  if (!CodecExportsMotionVectors(codec_name)) {
+    return FailedPreconditionError(
+        "video codec '" + codec_name + "' of '" + url +
+        "' does not export motion vectors in FFmpeg; slapse reads MPEG-1/2, MPEG-4 Part 2, "
+        "H.263 and H.264. Re-encode the stream (e.g. ffmpeg -i IN -c:v libx264 -bf 3 OUT.ts) "
+        "or configure the camera for H.264.");
+  }
+  const AVCodec* codec = avcodec_find_decoder(par->codec_id);
+  if (codec == nullptr) {
+    return FailedPreconditionError("this FFmpeg build has no decoder for '" + codec_name + "'");
+  }
+  r->dec_ = avcodec_alloc_context3(codec);
+  if (r->dec_ == nullptr) return ResourceExhaustedError("out of memory for the decoder");
+  err = avcodec_parameters_to_context(r->dec_, par);
+  if (err < 0) return InternalError("bad codec parameters: " + AvErrorString(err));
+  r->dec_->thread_count = std::max(1, options.decoder_threads);
+  AVDictionary* dec_opts = nullptr;
+  av_dict_set(&dec_opts, "flags2", "+export_mvs", 0);
+  err = avcodec_open2(r->dec_, codec, &dec_opts);
+  av_dict_free(&dec_opts);
+  if (err < 0) {
+    return FailedPreconditionError("cannot open the " + codec_name +
+                                   " decoder: " + AvErrorString(err));
+  }
+  r->pkt_ = av_packet_alloc();
+  r->frame_ = av_frame_alloc();
+  if (r->pkt_ == nullptr || r->frame_ == nullptr) return ResourceExhaustedError("out of memory");
+
+  r->time_base_s_ = av_q2d(st->time_base);
+  StreamInfo& info = r->info_;
+  info.codec_name = codec_name;
+  info.format_name = r->fmt_->iformat != nullptr ? r->fmt_->iformat->name : "";
+  info.width_px = par->width;
+  info.height_px = par->height;
+  const AVRational rate = st->avg_frame_rate.num > 0 ? st->avg_frame_rate : st->r_frame_rate;
+  info.fps = rate.num > 0 && rate.den > 0 ? av_q2d(rate) : 0.0;
+  // H.264 is quarter-pel; MPEG-1/2 and H.263 half-pel; MPEG-4 Part 2 is
+  // half-pel unless the stream uses quarter_sample, seen from the first MV.
+  info.mv_precision_denom = codec_name == "h264" ? 4 : 2;
+  info.b_frame_mvs = codec_name != "mpeg4" && codec_name != "h263" && codec_name != "h263p";
+  return StatusOr<std::unique_ptr<MvReader>>(std::move(r));
+}
+
+void MvReader::NoteError(const std::string& what) {
+  if (stats_.first_error.empty()) stats_.first_error = what;
+}
+
+void MvReader::Collect(AVFrame* f) {
+  FrameRecord rec;
+  rec.index = stats_.frames++;
+  rec.type = ToPictureType(f->pict_type);
+  const int64_t pts = f->best_effort_timestamp;
+  if (pts != AV_NOPTS_VALUE) {
+    if (first_pts_ == INT64_MIN) first_pts_ = pts;
+    rec.timestamp_s = static_cast<double>(pts - first_pts_) * time_base_s_;
+  } else if (info_.fps > 0) {
+    rec.timestamp_s = static_cast<double>(rec.index) / info_.fps;
+  }
+  rec.corrupt = f->decode_error_flags != 0 || (f->flags & AV_FRAME_FLAG_CORRUPT) != 0;
+  if (rec.corrupt) {
+    ++stats_.corrupt_frames;
+    char where[96];
+    std::snprintf(where, sizeof(where), "frame %lld at %.3f s decoded with concealed errors",
+                  static_cast<long long>(rec.index), rec.timestamp_s);
+    NoteError(where);
+  }
+
+  const AVFrameSideData* sd = av_frame_get_side_data(f, AV_FRAME_DATA_MOTION_VECTORS);
+  if (rec.type == PictureType::kB && !info_.b_frame_mvs) sd = nullptr;
+  if (sd != nullptr) {
+    const auto* mvs = reinterpret_cast<const AVMotionVector*>(sd->data);
+    const size_t n = sd->size / sizeof(AVMotionVector);
+    rec.mvs.reserve(n);
+    for (size_t i = 0; i < n; ++i) {
+      const AVMotionVector& m = mvs[i];
+      if (m.motion_scale == 0) continue;
+      MotionVector mv;
+      // FFmpeg's dst is the block centre with integer pixel edges; shift to pixel centres.
+      mv.x_px = static_cast<float>(m.dst_x) - 0.5f;
+      mv.y_px = static_cast<float>(m.dst_y) - 0.5f;
+      mv.dx_px = static_cast<float>(m.motion_x) / m.motion_scale;
+      mv.dy_px = static_cast<float>(m.motion_y) / m.motion_scale;
+      mv.w_px = m.w;
+      mv.h_px = m.h;
+      mv.direction = m.source > 0 ? RefDirection::kFuture : RefDirection::kPast;
+      if (m.motion_scale >= 4) info_.mv_precision_denom = std::max(info_.mv_precision_denom, 4);
+      rec.mvs.push_back(mv);
+    }
+  }
+
+  // GOP bookkeeping: B frames wait in pending_ until their next anchor is decoded.
+  rec.prev_anchor_index = last_anchor_index_;
+  if (!IsAnchor(rec.type)) {
+    if (rec.type == PictureType::kB) ++consecutive_b_;
+    pending_.push_back(std::move(rec));
+    return;
+  }
+  for (FrameRecord& b : pending_) {
+    b.next_anchor_index = rec.index;
+    ready_.push_back(std::move(b));
+  }
+  pending_.clear();
+  info_.max_consecutive_b = std::max(info_.max_consecutive_b, consecutive_b_);
+  consecutive_b_ = 0;
+  last_anchor_index_ = rec.index;
+  ready_.push_back(std::move(rec));
+}
+
+Status MvReader::Pump() {
+  while (ready_.empty() && !decoder_done_) {
+    // Drain every frame the decoder has ready.
+    int err = avcodec_receive_frame(dec_, frame_);
+    if (err >= 0) {
+      Collect(frame_);
+      av_frame_unref(frame_);
+      continue;
+    }
+    if (err == AVERROR_EOF) {
+      decoder_done_ = true;
+      break;
+    }
+    if (err != AVERROR(EAGAIN)) {
+      ++stats_.packet_errors;
+      NoteError("decoder failed: " + AvErrorString(err));
+      continue;
+    }
+    // The decoder needs input.
+    if (input_done_) {
+      // Already flushing: nothing more will come.
+      decoder_done_ = true;
+      break;
+    }
+    err = av_read_frame(fmt_, pkt_);
+    if (err < 0) {
+      input_done_ = true;
+      if (err == AVERROR_EXIT) {
+        input_status_ = CancelledError("reading was interrupted");
+      } else if (err != AVERROR_EOF) {
+        input_status_ = UnavailableError("input failed after " + std::to_string(stats_.packets) +
+                                         " packets: " + AvErrorString(err));
+      }
+      avcodec_send_packet(dec_, nullptr);  // enter draining mode
+      continue;
+    }
+    if (pkt_->stream_index == stream_index_) {
+      ++stats_.packets;
+      if ((pkt_->flags & AV_PKT_FLAG_CORRUPT) != 0) {
+        NoteError("packet " + std::to_string(stats_.packets) + " is marked corrupt by the demuxer");
+        ++stats_.packet_errors;
+      }
+      err = avcodec_send_packet(dec_, pkt_);
+      if (err < 0 && err != AVERROR(EAGAIN)) {
+        ++stats_.packet_errors;
+        NoteError("packet " + std::to_string(stats_.packets) +
+                  " failed to decode: " + AvErrorString(err));
+      }
+    }
+    av_packet_unref(pkt_);
+  }
+  if (decoder_done_ && !pending_.empty()) {
+    // The stream ended between a B frame and its next anchor.
+    for (FrameRecord& b : pending_) ready_.push_back(std::move(b));
+    pending_.clear();
+  }
+  return Status::Ok();
+}
+
+Status MvReader::EndStatus() const {
+  if (!input_status_.ok()) return input_status_;
+  if (stats_.packet_errors > 0 || stats_.corrupt_frames > 0) {
+    return DataLossError("stream damaged: " + std::to_string(stats_.packet_errors) +
+                         " packet error(s), " + std::to_string(stats_.corrupt_frames) +
+                         " frame(s) with concealed errors out of " + std::to_string(stats_.frames) +
+                         " decoded; first: " + stats_.first_error);
+  }
+  if (stats_.frames == 0) return DataLossError("no frame could be decoded");
+  return OutOfRangeError("end of stream");
+}
+
+Status MvReader::Next(FrameRecord* frame) {
+  SLAPSE_RETURN_IF_ERROR(Pump());
+  if (ready_.empty()) return EndStatus();
+  *frame = std::move(ready_.front());
+  ready_.pop_front();
+  return Status::Ok();
+}
+
+}  // namespace slapse

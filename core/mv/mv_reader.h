@@ -1,0 +1,103 @@
+// MvReader: decodes a compressed video with FFmpeg (flags2=+export_mvs) and
+// yields, per frame in display order, the motion vectors the encoder chose.
+//
+//   auto reader = MvReader::Open("drive.ts");
+//   if (!reader.ok()) { ... reader.status() ... }
+//   FrameRecord frame;
+//   Status s;
+//   while ((s = (*reader)->Next(&frame)).ok()) { ... }
+//   // s is OUT_OF_RANGE at a clean end of stream, DATA_LOSS if parts of the
+//   // stream could not be decoded (the frames that did decode were yielded).
+#pragma once
+
+#include <deque>
+#include <functional>
+#include <map>
+#include <memory>
+#include <string>
+
+#include "core/common/status.h"
+#include "core/mv/byte_source.h"
+#include "core/mv/frame_record.h"
+
+struct AVFormatContext;
+struct AVCodecContext;
+struct AVIOContext;
+struct AVPacket;
+struct AVFrame;
+
+namespace slapse {
+
+struct MvReaderOptions {
+  // Demuxer to force (e.g. "mpegts", "h264", "sdp"); empty = probe the input.
+  std::string format;
+  // Extra demuxer/protocol options, e.g. {"rtsp_transport", "tcp"}, {"timeout", "5000000"}.
+  std::map<std::string, std::string> format_options;
+  // Decoder threads; 1 keeps decoding deterministic and cheap for small frames.
+  int decoder_threads = 1;
+  // Polled during blocking I/O; returning true aborts it (Next() then returns CANCELLED).
+  std::function<bool()> interrupt;
+};
+
+// True if FFmpeg's decoder for this codec exports motion vectors.
+bool CodecExportsMotionVectors(const std::string& codec_name);
+
+class MvReader {
+ public:
+  // Opens a file path or URL (file:, rtsp:, rtp:, udp:, http:, ...).
+  static StatusOr<std::unique_ptr<MvReader>> Open(const std::string& url,
+                                                  const MvReaderOptions& options = {});
+  // Reads the stream from `source` through a custom AVIOContext.
+  static StatusOr<std::unique_ptr<MvReader>> Open(std::unique_ptr<ByteSource> source,
+                                                  const MvReaderOptions& options = {});
+  ~MvReader();
+  MvReader(const MvReader&) = delete;
+  MvReader& operator=(const MvReader&) = delete;
+
+  // Fills `frame` with the next frame in display order. Returns OK with a
+  // frame; OUT_OF_RANGE at a clean end of stream; DATA_LOSS at the end of a
+  // stream that had undecodable parts; CANCELLED if interrupted; UNAVAILABLE
+  // if the network input failed.
+  Status Next(FrameRecord* frame);
+
+  const StreamInfo& info() const { return info_; }
+  const ReadStats& stats() const { return stats_; }
+
+ private:
+  MvReader() = default;
+  static StatusOr<std::unique_ptr<MvReader>> OpenImpl(std::unique_ptr<MvReader> reader,
+                                                      const std::string& url,
+                                                      const MvReaderOptions& options);
+  static int InterruptTrampoline(void* opaque);
+  static int ReadTrampoline(void* opaque, uint8_t* buf, int size);
+
+  // Decodes until at least one frame is ready in `ready_` or the stream ends.
+  Status Pump();
+  void Collect(AVFrame* frame);
+  void NoteError(const std::string& what);
+  Status EndStatus() const;
+
+  MvReaderOptions options_;
+  std::unique_ptr<ByteSource> source_;
+  AVFormatContext* fmt_ = nullptr;
+  AVIOContext* avio_ = nullptr;
+  AVCodecContext* dec_ = nullptr;
+  AVPacket* pkt_ = nullptr;
+  AVFrame* frame_ = nullptr;
+  int stream_index_ = -1;
+  int64_t first_pts_ = INT64_MIN;
+  double time_base_s_ = 0.0;
+
+  StreamInfo info_;
+  ReadStats stats_;
+  bool input_done_ = false;    // demuxer reached the end (or failed)
+  bool decoder_done_ = false;  // decoder fully drained
+  Status input_status_;        // why the input ended, if not cleanly
+
+  int64_t last_anchor_index_ = -1;
+  int consecutive_b_ = 0;
+  std::deque<FrameRecord> pending_;  // non-anchor frames waiting for their next anchor
+  std::deque<FrameRecord> ready_;    // frames ready to hand out
+};
+
+}  // namespace slapse

@@ -1,0 +1,80 @@
+#include "tests/test_streams.h"
+
+#include <atomic>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <sstream>
+
+#include <unistd.h>
+
+#include <opencv2/imgproc.hpp>
+
+namespace slapse::testing {
+
+std::string MakeTempDir(const std::string& tag) {
+  static std::atomic<int> counter{0};
+  const auto dir =
+      std::filesystem::temp_directory_path() /
+      ("slapse_" + tag + "_" + std::to_string(::getpid()) + "_" + std::to_string(counter++));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  return dir.string();
+}
+
+cv::Mat NoiseTexture(int width_px, int height_px, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  cv::Mat tex(height_px, width_px, CV_32FC3);
+  for (int r = 0; r < height_px; ++r) {
+    auto* row = tex.ptr<cv::Vec3f>(r);
+    for (int c = 0; c < width_px; ++c) {
+      for (int k = 0; k < 3; ++k) row[c][k] = static_cast<float>(rng() % 256);
+    }
+  }
+  // Two scales of detail: fine grain that pins sub-pixel matches, coarse blobs
+  // that keep the block matcher out of local minima.
+  cv::Mat fine, coarse;
+  cv::GaussianBlur(tex, fine, cv::Size(0, 0), 1.2);
+  cv::GaussianBlur(tex, coarse, cv::Size(0, 0), 6.0);
+  cv::Mat mix = 1.5 * (fine - 128.0) + 4.0 * (coarse - 128.0) + 128.0;
+  cv::Mat out;
+  mix.convertTo(out, CV_8UC3);
+  return out;
+}
+
+Status WritePan(const std::string& path, const EncoderOptions& options, int frames, double vx_px,
+                double vy_px, int width_px, int height_px) {
+  const int margin = static_cast<int>(std::ceil(frames * (std::abs(vx_px) + std::abs(vy_px)))) + 8;
+  const cv::Mat tex = NoiseTexture(width_px + 2 * margin, height_px + 2 * margin, 7);
+  auto enc = VideoEncoder::Open(path, width_px, height_px, options);
+  if (!enc.ok()) return enc.status();
+  cv::Mat frame;
+  for (int i = 0; i < frames; ++i) {
+    // Frame i shows texture point q at q - margin + i * v: sample at x + margin - i * v.
+    const cv::Matx23d src_from_dst(1, 0, margin - i * vx_px, 0, 1, margin - i * vy_px);
+    cv::warpAffine(tex, frame, src_from_dst, cv::Size(width_px, height_px),
+                   cv::INTER_CUBIC | cv::WARP_INVERSE_MAP);
+    SLAPSE_RETURN_IF_ERROR((*enc)->Write(frame));
+  }
+  return (*enc)->Finish();
+}
+
+std::string ReadFileBytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+void WriteFileBytes(const std::string& path, const std::string& bytes) {
+  std::ofstream out(path, std::ios::binary);
+  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+}
+
+int RunCommand(const std::string& cmd) {
+  const int rc = std::system(cmd.c_str());
+  return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+}
+
+}  // namespace slapse::testing

@@ -1,0 +1,33 @@
+// Streams with known content, made at test time by the real encoders.
+#pragma once
+
+#include <string>
+
+#include <opencv2/core.hpp>
+
+#include "core/codec/video_encoder.h"
+#include "core/common/status.h"
+
+namespace slapse::testing {
+
+// A fresh directory under the system temp dir, unique per call.
+std::string MakeTempDir(const std::string& tag);
+
+// A band-limited random texture (8-bit BGR), deterministic per seed.
+cv::Mat NoiseTexture(int width_px, int height_px, uint64_t seed);
+
+// Writes `frames` frames of a global pan: the content of frame i is the
+// texture moved by i * (vx_px, vy_px), i.e. a point at p in frame i sits at
+// p + (j - i) * v in frame j. The true MV of a block at c referring from frame
+// j to frame r is therefore (r - j) * v.
+Status WritePan(const std::string& path, const EncoderOptions& options, int frames, double vx_px,
+                double vy_px, int width_px = 320, int height_px = 240);
+
+// Reads a whole file into memory.
+std::string ReadFileBytes(const std::string& path);
+void WriteFileBytes(const std::string& path, const std::string& bytes);
+
+// Runs a shell command, returns its exit code.
+int RunCommand(const std::string& cmd);
+
+}  // namespace slapse::testing
