@@ -45,6 +45,9 @@ struct FrameRecord {
   // Decoder reported damage (concealed errors) in this frame; its vectors are suspect.
   bool corrupt = false;
   std::vector<MotionVector> mvs;
+  // Decoded luma plane (width x height, row-major), only when
+  // MvReaderOptions::keep_luma is set; empty otherwise.
+  std::vector<uint8_t> luma;
 };
 
 // Facts about the stream known after opening (and refined while reading).

@@ -256,6 +256,14 @@ void MvReader::Collect(AVFrame* f) {
     }
   }
 
+  if (options_.keep_luma && f->data[0] != nullptr) {
+    rec.luma.resize(static_cast<size_t>(f->width) * f->height);
+    for (int y = 0; y < f->height; ++y) {
+      std::memcpy(rec.luma.data() + static_cast<size_t>(y) * f->width,
+                  f->data[0] + static_cast<ptrdiff_t>(y) * f->linesize[0], f->width);
+    }
+  }
+
   // GOP bookkeeping: B frames wait in pending_ until their next anchor is decoded.
   rec.prev_anchor_index = last_anchor_index_;
   if (!IsAnchor(rec.type)) {

@@ -35,6 +35,8 @@ struct MvReaderOptions {
   std::map<std::string, std::string> format_options;
   // Decoder threads; 1 keeps decoding deterministic and cheap for small frames.
   int decoder_threads = 1;
+  // Also hand out each frame's decoded luma plane (for overlays; costs a copy).
+  bool keep_luma = false;
   // Polled during blocking I/O; returning true aborts it (Next() then returns CANCELLED).
   std::function<bool()> interrupt;
 };

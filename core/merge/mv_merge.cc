@@ -1,0 +1,221 @@
+#include "core/merge/mv_merge.h"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <tuple>
+
+namespace slapse {
+namespace {
+
+double BinomialPmf(int n, int k, double q) {
+  double c = 1.0;
+  for (int i = 1; i <= k; ++i) c = c * (n - k + i) / i;
+  return c * std::pow(q, k) * std::pow(1.0 - q, n - k);
+}
+
+}  // namespace
+
+const char* SegmentTypeName(SegmentType type) {
+  switch (type) {
+    case SegmentType::kIP:
+      return "IP";
+    case SegmentType::kPP:
+      return "PP";
+    case SegmentType::kPI:
+      return "PI";
+    case SegmentType::kII:
+      return "II";
+  }
+  return "?";
+}
+
+double MergedVariance(int n_direct, int n_indirect, double sigma_px) {
+  // Direct: variance s^2, weight 2; indirect: variance 2 s^2, weight 1.
+  // Var(sum w_i m_i / sum w_i) = sum w_i^2 var_i / (sum w_i)^2
+  //   = (4 n_d s^2 + 2 n_i s^2) / (2 n_d + n_i)^2 = 2 s^2 / (2 n_d + n_i).
+  const int w = 2 * n_direct + n_indirect;
+  return w > 0 ? 2.0 * sigma_px * sigma_px / w : INFINITY;
+}
+
+double ImvExistenceProbability(bool has_direct, int n_b, double p) {
+  const double none_indirect = std::pow(1.0 - p * p, n_b);
+  return 1.0 - (has_direct ? (1.0 - p) : 1.0) * none_indirect;
+}
+
+double ExpectedMergedVariance(bool has_direct, int n_b, double p, double sigma_px, int min_imvs) {
+  const double q = p * p;
+  double sum = 0.0, mass = 0.0;
+  for (int nd = 0; nd <= (has_direct ? 1 : 0); ++nd) {
+    const double pd = has_direct ? (nd == 1 ? p : 1.0 - p) : 1.0;
+    for (int ni = 0; ni <= n_b; ++ni) {
+      if (nd + ni < std::max(min_imvs, 1)) continue;  // conditioned on enough IMVs
+      const double pr = pd * BinomialPmf(n_b, ni, q);
+      sum += pr * MergedVariance(nd, ni, sigma_px);
+      mass += pr;
+    }
+  }
+  return mass > 0 ? sum / mass : INFINITY;
+}
+
+std::optional<MergedMv> MergeCell(const std::vector<MvCandidate>& candidates, double sigma_px,
+                                  const MergeOptions& options) {
+  const size_t n = candidates.size();
+  if (n == 0) return std::nullopt;
+  std::vector<Eigen::Vector2d> disp(n);
+  std::vector<double> var(n);
+  for (size_t i = 0; i < n; ++i) {
+    disp[i] = candidates[i].earlier_px - candidates[i].later_px;
+    var[i] = (candidates[i].direct ? 1.0 : 2.0) * sigma_px * sigma_px;
+  }
+  // Two candidates agree when their displacements differ by less than the gate
+  // for the variance of their difference.
+  auto agree = [&](size_t i, size_t j) {
+    const double gate =
+        std::max(options.gate_sigmas * std::sqrt(var[i] + var[j]), options.gate_min_px);
+    return (disp[i] - disp[j]).norm() <= gate;
+  };
+  // Seed: the candidate that the most weight of *other* candidates agrees
+  // with (ties: the heavier, i.e. direct, candidate).
+  size_t seed = 0;
+  double best_support = -1.0;
+  for (size_t i = 0; i < n; ++i) {
+    double support = 0.0;
+    for (size_t j = 0; j < n; ++j) {
+      if (j != i && agree(i, j)) support += candidates[j].direct ? 2.0 : 1.0;
+    }
+    if (support > best_support ||
+        (support == best_support && candidates[i].direct && !candidates[seed].direct)) {
+      seed = i;
+      best_support = support;
+    }
+  }
+  // Several candidates and none agrees with another: no way to tell the
+  // in-line MV from the wrong matches, so the cell gives no correspondence.
+  if (n > 1 && best_support == 0.0) return std::nullopt;
+
+  MergedMv out;
+  out.later_px.setZero();
+  out.earlier_px.setZero();
+  double weight_sum = 0.0;
+  for (size_t i = 0; i < n; ++i) {
+    if (!agree(seed, i)) continue;
+    const MvCandidate& c = candidates[i];
+    const double w = c.direct ? 2.0 : 1.0;
+    out.later_px += w * c.later_px;
+    out.earlier_px += w * c.earlier_px;
+    weight_sum += w;
+    (c.direct ? out.n_direct : out.n_indirect)++;
+  }
+  out.later_px /= weight_sum;
+  out.earlier_px /= weight_sum;
+  out.variance_px2 = MergedVariance(out.n_direct, out.n_indirect, sigma_px);
+  return out;
+}
+
+SegmentMerger::SegmentMerger(int width_px, int height_px, double sigma_px, MergeOptions options)
+    : width_px_(width_px),
+      height_px_(height_px),
+      mb_cols_((width_px + 15) / 16),
+      mb_rows_((height_px + 15) / 16),
+      sigma_px_(sigma_px),
+      options_(options) {}
+
+void SegmentMerger::Reset() {
+  earlier_.reset();
+  b_frames_.clear();
+}
+
+int SegmentMerger::CellOf(const Eigen::Vector2d& x_px) const {
+  // Cell (col, row) covers pixels 16*col .. 16*col + 15, i.e. coordinates
+  // [16*col - 0.5, 16*col + 15.5) in the pixel-centre convention.
+  const int col = static_cast<int>(std::floor((x_px.x() + 0.5) / 16.0));
+  const int row = static_cast<int>(std::floor((x_px.y() + 0.5) / 16.0));
+  if (col < 0 || row < 0 || col >= mb_cols_ || row >= mb_rows_) return -1;
+  if (x_px.x() > width_px_ - 0.5 || x_px.y() > height_px_ - 0.5) return -1;
+  return row * mb_cols_ + col;
+}
+
+std::optional<AnchorPair> SegmentMerger::Push(const FrameRecord& frame) {
+  if (frame.type == PictureType::kB) {
+    // Keep only B frames that sit between the current anchor and a later one.
+    if (earlier_.has_value() && frame.prev_anchor_index == earlier_->index && !frame.corrupt) {
+      b_frames_.push_back(frame);
+    }
+    return std::nullopt;
+  }
+  if (!IsAnchor(frame.type)) return std::nullopt;
+  std::optional<AnchorPair> pair;
+  if (earlier_.has_value()) pair = Build(frame);
+  earlier_ = frame;
+  earlier_->mvs.clear();
+  earlier_->luma.clear();
+  b_frames_.clear();
+  return pair;
+}
+
+AnchorPair SegmentMerger::Build(const FrameRecord& later) const {
+  AnchorPair pair;
+  pair.earlier_index = earlier_->index;
+  pair.later_index = later.index;
+  pair.earlier_timestamp_s = earlier_->timestamp_s;
+  pair.later_timestamp_s = later.timestamp_s;
+  pair.n_b = static_cast<int>(later.index - earlier_->index - 1);
+  pair.mb_cols = mb_cols_;
+  pair.mb_rows = mb_rows_;
+  const bool earlier_i = earlier_->type == PictureType::kI;
+  const bool later_i = later.type == PictureType::kI;
+  pair.type = later_i ? (earlier_i ? SegmentType::kII : SegmentType::kPI)
+                      : (earlier_i ? SegmentType::kIP : SegmentType::kPP);
+
+  std::vector<std::vector<MvCandidate>> cells(static_cast<size_t>(mb_cols_) * mb_rows_);
+  // Direct: the later P frame's past vectors refer to the earlier anchor.
+  if (options_.use_direct && later.type == PictureType::kP &&
+      later.prev_anchor_index == earlier_->index && !later.corrupt) {
+    for (const MotionVector& mv : later.mvs) {
+      if (mv.direction != RefDirection::kPast) continue;
+      const Eigen::Vector2d start(mv.x_px, mv.y_px);
+      const int cell = CellOf(start);
+      if (cell < 0) continue;
+      cells[cell].push_back({start, start + Eigen::Vector2d(mv.dx_px, mv.dy_px), true});
+    }
+  }
+  // Indirect: B blocks with both a past (f) and a future (g) vector.
+  if (options_.use_indirect) {
+    for (const FrameRecord& b : b_frames_) {
+      if (b.next_anchor_index != later.index) continue;
+      // FFmpeg exports a bi-predicted block as two entries with the same block.
+      std::map<std::tuple<float, float, int, int>,
+               std::pair<const MotionVector*, const MotionVector*>>
+          blocks;
+      for (const MotionVector& mv : b.mvs) {
+        auto& slot = blocks[{mv.x_px, mv.y_px, mv.w_px, mv.h_px}];
+        (mv.direction == RefDirection::kPast ? slot.first : slot.second) = &mv;
+      }
+      for (const auto& [key, fg] : blocks) {
+        if (fg.first == nullptr || fg.second == nullptr) continue;
+        const Eigen::Vector2d y(fg.first->x_px, fg.first->y_px);
+        const Eigen::Vector2d start = y + Eigen::Vector2d(fg.second->dx_px, fg.second->dy_px);
+        const Eigen::Vector2d end = y + Eigen::Vector2d(fg.first->dx_px, fg.first->dy_px);
+        const int cell = CellOf(start);
+        if (cell < 0) continue;
+        cells[cell].push_back({start, end, false});
+      }
+    }
+  }
+  for (size_t cell = 0; cell < cells.size(); ++cell) {
+    const auto merged = MergeCell(cells[cell], sigma_px_, options_);
+    if (!merged.has_value()) continue;
+    Correspondence c;
+    c.x_later_px = merged->later_px;
+    c.x_earlier_px = merged->earlier_px;
+    c.variance_px2 = merged->variance_px2;
+    c.mb_index = static_cast<int>(cell);
+    c.n_direct = merged->n_direct;
+    c.n_indirect = merged->n_indirect;
+    pair.correspondences.push_back(c);
+  }
+  return pair;
+}
+
+}  // namespace slapse

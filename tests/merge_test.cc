@@ -1,0 +1,296 @@
+// MV merging: Lemma 1 and Lemma 2 against Monte Carlo simulation, gating,
+// the weighted start/end merge, and segment assembly from frame records.
+#include "core/merge/mv_merge.h"
+
+#include <cmath>
+#include <random>
+
+#include <gtest/gtest.h>
+
+namespace slapse {
+namespace {
+
+constexpr double kSigma = 0.25;  // MPEG-2 half-pel
+
+// Monte Carlo model of one macroblock (paper Sec. III-B): each block match is
+// correct with probability p, its error N(0, sigma^2) per axis; a wrong match
+// lands anywhere within +-16 px. An indirect MV is correct only when both its
+// B-frame vectors are.
+struct McCell {
+  std::vector<MvCandidate> candidates;
+  int n_direct_correct = 0, n_indirect_correct = 0;
+};
+
+McCell SimulateCell(std::mt19937_64& rng, bool has_direct, int n_b, double p,
+                    const Eigen::Vector2d& true_m, bool include_wrong) {
+  std::normal_distribution<double> noise(0.0, kSigma);
+  std::uniform_real_distribution<double> unit(0.0, 1.0), garbage(-16.0, 16.0);
+  McCell cell;
+  const Eigen::Vector2d centre(100, 100);
+  if (has_direct) {
+    const bool ok = unit(rng) < p;
+    const Eigen::Vector2d m = ok ? true_m + Eigen::Vector2d(noise(rng), noise(rng))
+                                 : Eigen::Vector2d(garbage(rng), garbage(rng));
+    cell.n_direct_correct += ok;
+    if (ok || include_wrong) cell.candidates.push_back({centre, centre + m, true});
+  }
+  for (int b = 0; b < n_b; ++b) {
+    const bool f_ok = unit(rng) < p, g_ok = unit(rng) < p;
+    const Eigen::Vector2d f_err(noise(rng), noise(rng)), g_err(noise(rng), noise(rng));
+    // Block at y in the B frame; the true displacement is split as f - g = m.
+    const Eigen::Vector2d y = centre + Eigen::Vector2d(unit(rng) * 8 - 4, unit(rng) * 8 - 4);
+    const Eigen::Vector2d g =
+        -0.5 * true_m + (g_ok ? g_err : Eigen::Vector2d(garbage(rng), garbage(rng)));
+    const Eigen::Vector2d f =
+        0.5 * true_m + (f_ok ? f_err : Eigen::Vector2d(garbage(rng), garbage(rng)));
+    const bool ok = f_ok && g_ok;
+    cell.n_indirect_correct += ok;
+    // Start y + g, end y + f: displacement f - g, start shifted off the centre.
+    if (ok || include_wrong) cell.candidates.push_back({y + g, y + f, false});
+  }
+  return cell;
+}
+
+struct SegCase {
+  bool has_direct;
+  int n_b;
+  double p;
+};
+
+class LemmaTest : public ::testing::TestWithParam<SegCase> {};
+
+TEST_P(LemmaTest, Lemma1ExistenceMatchesSimulation) {
+  const SegCase c = GetParam();
+  std::mt19937_64 rng(1);
+  const int trials = 200000;
+  int exists = 0;
+  for (int i = 0; i < trials; ++i) {
+    const McCell cell = SimulateCell(rng, c.has_direct, c.n_b, c.p, {3, -1}, false);
+    exists += cell.n_direct_correct + cell.n_indirect_correct > 0;
+  }
+  const double p_hat = static_cast<double>(exists) / trials;
+  const double p = ImvExistenceProbability(c.has_direct, c.n_b, c.p);
+  // Binomial standard error <= 0.0012 at 200k trials: 5 sigma.
+  EXPECT_NEAR(p_hat, p, 0.006) << "lemma " << p << " simulation " << p_hat;
+}
+
+TEST_P(LemmaTest, Lemma2VarianceMatchesSimulationWithKnownImvs) {
+  const SegCase c = GetParam();
+  std::mt19937_64 rng(2);
+  MergeOptions no_gate;
+  no_gate.gate_sigmas = 1e9;  // the paper's assumption: the IMV set is known
+  const Eigen::Vector2d true_m(3, -1);
+  double sum_x = 0, sum_y = 0, sum_xx = 0, sum_yy = 0;
+  int n = 0;
+  for (int i = 0; i < 200000; ++i) {
+    const McCell cell = SimulateCell(rng, c.has_direct, c.n_b, c.p, true_m, false);
+    const auto merged = MergeCell(cell.candidates, kSigma, no_gate);
+    ASSERT_EQ(merged.has_value(), !cell.candidates.empty());
+    if (!merged) continue;
+    EXPECT_DOUBLE_EQ(merged->variance_px2,
+                     MergedVariance(cell.n_direct_correct, cell.n_indirect_correct, kSigma));
+    const Eigen::Vector2d e = merged->earlier_px - merged->later_px - true_m;
+    sum_x += e.x();
+    sum_y += e.y();
+    sum_xx += e.x() * e.x();
+    sum_yy += e.y() * e.y();
+    ++n;
+  }
+  const double expected = ExpectedMergedVariance(c.has_direct, c.n_b, c.p, kSigma);
+  EXPECT_NEAR(sum_x / n, 0.0, 0.003);  // zero mean
+  EXPECT_NEAR(sum_y / n, 0.0, 0.003);
+  // Relative standard error of a variance estimate from >= 100k samples of a
+  // mixture is ~1%: 4 % tolerance.
+  EXPECT_NEAR(sum_xx / n / expected, 1.0, 0.04) << "expected " << expected;
+  EXPECT_NEAR(sum_yy / n / expected, 1.0, 0.04);
+}
+
+INSTANTIATE_TEST_SUITE_P(Segments, LemmaTest,
+                         ::testing::Values(SegCase{true, 3, 0.6}, SegCase{true, 3, 0.8},
+                                           SegCase{false, 3, 0.8}, SegCase{true, 2, 0.9},
+                                           SegCase{false, 1, 0.7}),
+                         [](const auto& info) {
+                           return std::string(info.param.has_direct ? "direct" : "nodirect") +
+                                  "_nb" + std::to_string(info.param.n_b) + "_p" +
+                                  std::to_string(static_cast<int>(info.param.p * 100));
+                         });
+
+// With wrong matches mixed in (every cell with at least three candidates),
+// the consensus gate must keep wrong merges rare and the merged error at
+// Lemma 2's level for the cells it accepts (those with >= 2 IMVs).
+class GatingTest : public ::testing::TestWithParam<SegCase> {};
+
+TEST_P(GatingTest, KeepsTheMergedErrorAtLemma2WithWrongMatches) {
+  const SegCase c = GetParam();
+  ASSERT_GE(c.n_b + (c.has_direct ? 1 : 0), 3);
+  std::mt19937_64 rng(3);
+  const Eigen::Vector2d true_m(3, -1);
+  double sum_sq = 0;
+  int merged_cells = 0, wrong_merges = 0, good = 0, two_imv_cells = 0, two_imv_merged = 0;
+  for (int i = 0; i < 100000; ++i) {
+    const McCell cell = SimulateCell(rng, c.has_direct, c.n_b, c.p, true_m, true);
+    const auto merged = MergeCell(cell.candidates, kSigma, MergeOptions{});
+    const int imvs = cell.n_direct_correct + cell.n_indirect_correct;
+    if (imvs >= 2) {
+      ++two_imv_cells;
+      two_imv_merged += merged.has_value();
+    }
+    if (!merged) continue;
+    ++merged_cells;
+    const Eigen::Vector2d e = merged->earlier_px - merged->later_px - true_m;
+    if (e.norm() > 1.5) {  // >= 4 sigma of any merged IMV set: not an IMV merge
+      ++wrong_merges;
+      continue;
+    }
+    sum_sq += 0.5 * e.squaredNorm();
+    ++good;
+  }
+  // A wrong merge needs two wrong matches to agree (within ~2 px in a 32 px
+  // square: ~1.2 % a pair) while the IMVs do not: a few per cent at most.
+  EXPECT_LT(wrong_merges, 0.03 * merged_cells);
+  // Two agreeing IMVs always win the consensus.
+  EXPECT_GT(two_imv_merged, 0.99 * two_imv_cells);
+  const double expected = ExpectedMergedVariance(c.has_direct, c.n_b, c.p, kSigma, 2);
+  // Admitted wrong matches near the truth widen it a little: 15 %.
+  EXPECT_NEAR(sum_sq / good / expected, 1.0, 0.15) << "expected " << expected;
+}
+
+INSTANTIATE_TEST_SUITE_P(Segments, GatingTest,
+                         ::testing::Values(SegCase{true, 3, 0.6}, SegCase{true, 3, 0.8},
+                                           SegCase{false, 3, 0.8}, SegCase{true, 2, 0.9}));
+
+TEST(MergeTest, VarianceAndProbabilityClosedForms) {
+  EXPECT_DOUBLE_EQ(MergedVariance(1, 0, kSigma), kSigma * kSigma);
+  EXPECT_DOUBLE_EQ(MergedVariance(0, 1, kSigma), 2 * kSigma * kSigma);
+  EXPECT_DOUBLE_EQ(MergedVariance(1, 3, kSigma), 2 * kSigma * kSigma / 5);
+  EXPECT_TRUE(std::isinf(MergedVariance(0, 0, kSigma)));
+  EXPECT_NEAR(ImvExistenceProbability(true, 3, 0.6), 1 - 0.4 * std::pow(1 - 0.36, 3), 1e-12);
+  EXPECT_NEAR(ImvExistenceProbability(false, 3, 0.6), 1 - std::pow(1 - 0.36, 3), 1e-12);
+  // Certain matches: every MV merged, variance 2 s^2 / (2 + n_b).
+  EXPECT_NEAR(ExpectedMergedVariance(true, 3, 1.0, kSigma), MergedVariance(1, 3, kSigma), 1e-12);
+}
+
+TEST(MergeTest, WeightedStartEndMergeIsExactForAffineMotion) {
+  // earlier = A later + b for every correspondence: the merged pair must obey it too,
+  // although its candidates start at different points of the cell.
+  Eigen::Matrix2d a;
+  a << 1.3, 0.1, -0.05, 1.25;  // near-road scaling over a segment
+  const Eigen::Vector2d b(-4, 7);
+  std::vector<MvCandidate> cands;
+  cands.push_back({{100, 100}, a * Eigen::Vector2d(100, 100) + b, true});
+  for (const Eigen::Vector2d s :
+       {Eigen::Vector2d(95, 97), Eigen::Vector2d(104, 103), Eigen::Vector2d(99, 106)}) {
+    cands.push_back({s, a * s + b, false});
+  }
+  MergeOptions wide;
+  wide.gate_min_px = 100;
+  const auto merged = MergeCell(cands, kSigma, wide);
+  ASSERT_TRUE(merged);
+  EXPECT_EQ(merged->n_direct, 1);
+  EXPECT_EQ(merged->n_indirect, 3);
+  EXPECT_LT((merged->earlier_px - (a * merged->later_px + b)).norm(), 1e-9);
+  // Filing the displacements at the centre instead (the paper's way) is off by pixels here.
+  Eigen::Vector2d mean_disp = Eigen::Vector2d::Zero();
+  for (const auto& c : cands) mean_disp += (c.direct ? 2 : 1) * (c.earlier_px - c.later_px);
+  mean_disp /= 5;
+  EXPECT_GT((Eigen::Vector2d(100, 100) + mean_disp - (a * Eigen::Vector2d(100, 100) + b)).norm(),
+            0.3);
+}
+
+TEST(MergeTest, ConsensusRejectsAnOutlierAndAmbiguousCells) {
+  std::vector<MvCandidate> cands = {{{0, 0}, {2, 0}, true},
+                                    {{0, 0}, {2.1, 0.1}, false},
+                                    {{0, 0}, {1.9, -0.1}, false},
+                                    {{0, 0}, {-9, 5}, false}};
+  const auto merged = MergeCell(cands, kSigma, MergeOptions{});
+  ASSERT_TRUE(merged);
+  EXPECT_EQ(merged->n_direct, 1);
+  EXPECT_EQ(merged->n_indirect, 2);
+  EXPECT_NEAR(merged->earlier_px.x(), 2.0, 1e-9);
+  EXPECT_FALSE(MergeCell({}, kSigma, MergeOptions{}).has_value());
+  // Three candidates, no two agreeing: nothing to merge.
+  EXPECT_FALSE(
+      MergeCell({{{0, 0}, {2, 0}, true}, {{0, 0}, {8, 0}, false}, {{0, 0}, {-5, 3}, false}}, kSigma,
+                MergeOptions{})
+          .has_value());
+  // A lone candidate stands.
+  EXPECT_TRUE(MergeCell({{{0, 0}, {2, 0}, false}}, kSigma, MergeOptions{}).has_value());
+}
+
+// Frame records of a pure translation by v px per frame, as the MV reader yields them.
+FrameRecord Frame(int64_t index, PictureType type, int64_t prev, int64_t next, double vx,
+                  bool with_mvs = true) {
+  FrameRecord f;
+  f.index = index;
+  f.timestamp_s = index / 30.0;
+  f.type = type;
+  f.prev_anchor_index = prev;
+  f.next_anchor_index = next;
+  if (!with_mvs || type == PictureType::kI) return f;
+  for (int row = 0; row < 4; ++row) {
+    for (int col = 0; col < 4; ++col) {
+      MotionVector mv;
+      mv.x_px = 16 * col + 7.5f;
+      mv.y_px = 16 * row + 7.5f;
+      mv.dx_px = static_cast<float>(-(index - prev) * vx);  // past: against the motion
+      f.mvs.push_back(mv);
+      if (type == PictureType::kB) {
+        mv.direction = RefDirection::kFuture;
+        mv.dx_px = static_cast<float>((next - index) * vx);
+        f.mvs.push_back(mv);
+      }
+    }
+  }
+  return f;
+}
+
+TEST(SegmentMergerTest, AssemblesIpPpAndPiSegments) {
+  SegmentMerger merger(64, 64, kSigma);
+  const double v = 0.5;
+  EXPECT_FALSE(merger.Push(Frame(0, PictureType::kI, -1, -1, v)));
+  for (int b = 1; b <= 3; ++b) EXPECT_FALSE(merger.Push(Frame(b, PictureType::kB, 0, 4, v)));
+  auto ip = merger.Push(Frame(4, PictureType::kP, 0, -1, v));
+  ASSERT_TRUE(ip);
+  EXPECT_EQ(ip->type, SegmentType::kIP);
+  EXPECT_EQ(ip->n_b, 3);
+  EXPECT_EQ(ip->earlier_index, 0);
+  EXPECT_EQ(ip->later_index, 4);
+  EXPECT_EQ(ip->mb_cols, 4);
+  EXPECT_EQ(ip->correspondences.size(), 16u);
+  for (const Correspondence& c : ip->correspondences) {
+    EXPECT_EQ(c.n_direct, 1);
+    EXPECT_EQ(c.n_indirect, 3);  // one bi-predicted block per B frame
+    EXPECT_NEAR((c.x_earlier_px - c.x_later_px).x(), -4 * v, 1e-6);
+    EXPECT_DOUBLE_EQ(c.variance_px2, MergedVariance(c.n_direct, c.n_indirect, kSigma));
+  }
+  for (int b = 5; b <= 7; ++b) merger.Push(Frame(b, PictureType::kB, 4, 8, v));
+  auto pp = merger.Push(Frame(8, PictureType::kP, 4, -1, v));
+  ASSERT_TRUE(pp);
+  EXPECT_EQ(pp->type, SegmentType::kPP);
+  for (int b = 9; b <= 11; ++b) merger.Push(Frame(b, PictureType::kB, 8, 12, v));
+  auto pi = merger.Push(Frame(12, PictureType::kI, 8, -1, v));
+  ASSERT_TRUE(pi);
+  EXPECT_EQ(pi->type, SegmentType::kPI);
+  for (const Correspondence& c : pi->correspondences) {
+    EXPECT_EQ(c.n_direct, 0);
+    EXPECT_GE(c.n_indirect, 1);
+    EXPECT_NEAR((c.x_earlier_px - c.x_later_px).x(), -4 * v, 1e-6);
+  }
+}
+
+TEST(SegmentMergerTest, IgnoresBFramesOfAnotherSegmentAndCorruptFrames) {
+  SegmentMerger merger(64, 64, kSigma);
+  merger.Push(Frame(0, PictureType::kI, -1, -1, 0.5));
+  FrameRecord stray = Frame(1, PictureType::kB, -7, 4, 0.5);  // open-GOP leftover
+  merger.Push(stray);
+  FrameRecord broken = Frame(2, PictureType::kB, 0, 4, 0.5);
+  broken.corrupt = true;
+  merger.Push(broken);
+  FrameRecord p = Frame(4, PictureType::kP, 0, -1, 0.5);
+  auto pair = merger.Push(p);
+  ASSERT_TRUE(pair);
+  for (const Correspondence& c : pair->correspondences) EXPECT_EQ(c.n_indirect, 0);
+}
+
+}  // namespace
+}  // namespace slapse
