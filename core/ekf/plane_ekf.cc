@@ -1,0 +1,415 @@
+#include "core/ekf/plane_ekf.h"
+
+#include <algorithm>
+#include <cmath>
+#include <set>
+
+#include <Eigen/Cholesky>
+
+#include "core/common/so3.h"
+
+namespace slapse {
+namespace {
+
+constexpr int kTheta = 0, kT = 3, kW = 6, kV = 9;
+
+void Symmetrize(Eigen::MatrixXd* p) { *p = 0.5 * (*p + p->transpose()).eval(); }
+
+// Inverse of a symmetric positive definite matrix by LLT; false if it is not SPD.
+bool InverseSpd(const Eigen::MatrixXd& a, Eigen::MatrixXd* inv) {
+  Eigen::LLT<Eigen::MatrixXd> llt(a);
+  if (llt.info() != Eigen::Success) return false;
+  *inv = llt.solve(Eigen::MatrixXd::Identity(a.rows(), a.cols()));
+  return inv->allFinite();
+}
+
+}  // namespace
+
+PlaneEkf::PlaneEkf(const Intrinsics& intrinsics, EkfOptions options)
+    : intrinsics_(intrinsics),
+      K_(intrinsics.K()),
+      K_inv_(intrinsics.K().inverse()),
+      options_(options) {}
+
+// pi' = a / s with a = R^T pi, s = 1 - pi^T t.
+//   d pi'/d pi     = R^T / s + a t^T / s^2
+//   d pi'/d dtheta = [a]x / s          (R = R_hat Exp(dtheta): R^T pi ~ a + [a]x dtheta)
+//   d pi'/d t      = a pi^T / s^2
+Eigen::Vector3d PlaneEkf::TransitionPlane(const Eigen::Vector3d& pi, const Eigen::Matrix3d& R,
+                                          const Eigen::Vector3d& t, Eigen::Matrix3d* d_pi,
+                                          Eigen::Matrix3d* d_theta, Eigen::Matrix3d* d_t) {
+  const Eigen::Vector3d a = R.transpose() * pi;
+  const double s = 1.0 - pi.dot(t);
+  if (d_pi != nullptr) *d_pi = R.transpose() / s + a * t.transpose() / (s * s);
+  if (d_theta != nullptr) *d_theta = Skew(a) / s;
+  if (d_t != nullptr) *d_t = a * pi.transpose() / (s * s);
+  return a / s;
+}
+
+// z = proj(u), u = K q, q = R p + t (pi^T p), p = K^-1 [x; 1].
+//   d z/d u      = [1/u_z, 0, -u_x/u_z^2; 0, 1/u_z, -u_y/u_z^2]
+//   d q/d dtheta = -R [p]x            (R = R_hat Exp(dtheta))
+//   d q/d t      = (pi^T p) I
+//   d q/d pi     = t p^T
+bool PlaneEkf::ObservePoint(const Eigen::Matrix3d& K, const Eigen::Matrix3d& K_inv,
+                            const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
+                            const Eigen::Vector3d& pi, const Eigen::Vector2d& x_later,
+                            Eigen::Vector2d* x_earlier, Eigen::Matrix<double, 2, 3>* d_theta,
+                            Eigen::Matrix<double, 2, 3>* d_t, Eigen::Matrix<double, 2, 3>* d_pi) {
+  const Eigen::Vector3d p = K_inv * x_later.homogeneous();
+  const double inv_depth = pi.dot(p);  // 1 / z of the plane point in the later camera
+  if (inv_depth <= 0) return false;
+  const Eigen::Vector3d q = R * p + t * inv_depth;
+  const Eigen::Vector3d u = K * q;
+  if (u.z() <= 1e-9 * q.norm()) return false;
+  *x_earlier = u.hnormalized();
+  Eigen::Matrix<double, 2, 3> dz_du;
+  dz_du << 1 / u.z(), 0, -u.x() / (u.z() * u.z()), 0, 1 / u.z(), -u.y() / (u.z() * u.z());
+  const Eigen::Matrix<double, 2, 3> dz_dq = dz_du * K;
+  if (d_theta != nullptr) *d_theta = -dz_dq * R * Skew(p);
+  if (d_t != nullptr) *d_t = dz_dq * inv_depth;
+  if (d_pi != nullptr) *d_pi = dz_dq * t * p.transpose();
+  return true;
+}
+
+Status PlaneEkf::Initialize(const Rigid3d& prev_from_cur, double dt_s) {
+  if (!(dt_s > 0)) return InvalidArgumentError("EKF initialisation needs dt_s > 0");
+  R_ = prev_from_cur.R();
+  t_ = prev_from_cur.translation;
+  w_ = LogSO3(R_) / dt_s;
+  v_ = t_ / dt_s;
+  planes_.clear();
+  P_ = Eigen::MatrixXd::Zero(kMotionDim, kMotionDim);
+  const double t_norm = std::max(t_.norm(), 1e-9);
+  P_.block<3, 3>(kTheta, kTheta).diagonal().setConstant(std::pow(0.01, 2));
+  // The first step's length fixes the scale: keep it tight.
+  P_.block<3, 3>(kT, kT).diagonal().setConstant(std::pow(0.02 * t_norm, 2));
+  P_.block<3, 3>(kW, kW).diagonal().setConstant(std::pow(options_.init_angular_velocity_rad_s, 2));
+  P_.block<3, 3>(kV, kV).diagonal().setConstant(
+      std::pow(options_.init_velocity_rel * v_.norm(), 2));
+  initialized_ = true;
+  return Status::Ok();
+}
+
+EkfState PlaneEkf::PredictState(const EkfState& x, double dt_s, Eigen::MatrixXd* F) {
+  EkfState y = x;
+  const Eigen::Vector3d w_dt = x.w * dt_s;
+  y.R = ExpSO3(w_dt);
+  y.t = x.v * dt_s;
+  const Eigen::Matrix3d jr_dt = RightJacobianSO3(w_dt) * dt_s;
+  const int n = kMotionDim + 3 * static_cast<int>(x.pis.size());
+  if (F != nullptr) {
+    // The old step motion (R, t) does not enter: the new one comes from w, v.
+    F->setZero(n, n);
+    F->block<3, 3>(kTheta, kW) = jr_dt;
+    F->block<3, 3>(kT, kV) = dt_s * Eigen::Matrix3d::Identity();
+    F->block<3, 3>(kW, kW).setIdentity();
+    F->block<3, 3>(kV, kV).setIdentity();
+  }
+  for (size_t i = 0; i < x.pis.size(); ++i) {
+    Eigen::Matrix3d A, B, C;
+    y.pis[i] = TransitionPlane(x.pis[i], y.R, y.t, &A, &B, &C);
+    if (F != nullptr) {
+      const int o = kMotionDim + 3 * static_cast<int>(i);
+      F->block<3, 3>(o, o) = A;
+      F->block<3, 3>(o, kW) = B * jr_dt;
+      F->block<3, 3>(o, kV) = C * dt_s;
+    }
+  }
+  return y;
+}
+
+EkfState PlaneEkf::Retract(const EkfState& x, const Eigen::VectorXd& delta) {
+  EkfState y = x;
+  y.R = x.R * ExpSO3(delta.segment<3>(kTheta));
+  y.t += delta.segment<3>(kT);
+  y.w += delta.segment<3>(kW);
+  y.v += delta.segment<3>(kV);
+  for (size_t i = 0; i < y.pis.size(); ++i) y.pis[i] += delta.segment<3>(kMotionDim + 3 * i);
+  return y;
+}
+
+Status PlaneEkf::Predict(double dt_s) {
+  if (!initialized_) return FailedPreconditionError("EKF not initialised");
+  if (!(dt_s > 0)) return InvalidArgumentError("EKF prediction needs dt_s > 0");
+  const int n = static_cast<int>(P_.rows());
+  EkfState x{R_, t_, w_, v_, {}};
+  for (const PlaneTrack& p : planes_) x.pis.push_back(p.pi);
+  Eigen::MatrixXd F;
+  const EkfState y = PredictState(x, dt_s, &F);
+
+  // Process noise G Q G^T. Noise enters the new step motion (n_theta, n_t:
+  // deviation from constant velocity), the velocities (random walks n_w, n_v)
+  // and each plane (n_pi); a plane's transition sees the new step motion, so
+  // it also receives B n_theta + C n_t.
+  const Eigen::Matrix3d q_theta =
+      std::pow(options_.step_rotation_rad, 2) * Eigen::Matrix3d::Identity();
+  const Eigen::Matrix3d q_t = (std::pow(options_.step_translation_rel * y.t.norm(), 2) + 1e-12) *
+                              Eigen::Matrix3d::Identity();
+  Eigen::MatrixXd GQG = Eigen::MatrixXd::Zero(n, n);
+  GQG.block<3, 3>(kTheta, kTheta) = q_theta;
+  GQG.block<3, 3>(kT, kT) = q_t;
+  GQG.block<3, 3>(kW, kW).diagonal().setConstant(std::pow(options_.angular_accel_rad_s2, 2) * dt_s);
+  GQG.block<3, 3>(kV, kV).diagonal().setConstant(
+      std::pow(options_.relative_accel_per_s * v_.norm(), 2) * dt_s + 1e-12);
+  std::vector<Eigen::Matrix3d> B(planes_.size()), C(planes_.size());
+  for (size_t i = 0; i < planes_.size(); ++i) {
+    TransitionPlane(x.pis[i], y.R, y.t, nullptr, &B[i], &C[i]);
+    const int o = PlaneOffset(i);
+    GQG.block<3, 3>(o, kTheta) = B[i] * q_theta;
+    GQG.block<3, 3>(o, kT) = C[i] * q_t;
+    GQG.block<3, 3>(kTheta, o) = GQG.block<3, 3>(o, kTheta).transpose();
+    GQG.block<3, 3>(kT, o) = GQG.block<3, 3>(o, kT).transpose();
+  }
+  for (size_t i = 0; i < planes_.size(); ++i) {
+    for (size_t j = 0; j < planes_.size(); ++j) {
+      GQG.block<3, 3>(PlaneOffset(i), PlaneOffset(j)) =
+          B[i] * q_theta * B[j].transpose() + C[i] * q_t * C[j].transpose();
+    }
+    GQG.block<3, 3>(PlaneOffset(i), PlaneOffset(i)).diagonal().array() +=
+        std::pow(options_.plane_rel * y.pis[i].norm(), 2);
+  }
+  P_ = F * P_ * F.transpose() + GQG;
+  Symmetrize(&P_);
+  R_ = y.R;
+  t_ = y.t;
+  for (size_t i = 0; i < planes_.size(); ++i) planes_[i].pi = y.pis[i];
+  return Status::Ok();
+}
+
+Eigen::Matrix3d PlaneEkf::PlaneCovariance(size_t index) const {
+  return P_.block<3, 3>(PlaneOffset(index), PlaneOffset(index));
+}
+
+void PlaneEkf::RemovePlane(size_t index) {
+  const int o = PlaneOffset(index), n = static_cast<int>(P_.rows()), tail = n - o - 3;
+  Eigen::MatrixXd P(n - 3, n - 3);
+  P.topLeftCorner(o, o) = P_.topLeftCorner(o, o);
+  P.topRightCorner(o, tail) = P_.topRightCorner(o, tail);
+  P.bottomLeftCorner(tail, o) = P_.bottomLeftCorner(tail, o);
+  P.bottomRightCorner(tail, tail) = P_.bottomRightCorner(tail, tail);
+  P_ = std::move(P);
+  planes_.erase(planes_.begin() + static_cast<std::ptrdiff_t>(index));
+}
+
+void PlaneEkf::Rescale(double s) {
+  t_ *= s;
+  v_ *= s;
+  const int n = static_cast<int>(P_.rows());
+  Eigen::VectorXd scale = Eigen::VectorXd::Ones(n);
+  scale.segment<3>(kT).setConstant(s);
+  scale.segment<3>(kV).setConstant(s);
+  for (size_t i = 0; i < planes_.size(); ++i) {
+    planes_[i].pi /= s;
+    scale.segment<3>(PlaneOffset(i)).setConstant(1.0 / s);
+  }
+  P_ = scale.asDiagonal() * P_ * scale.asDiagonal();
+}
+
+// Initialises pi of an untracked plane from its correspondences with the
+// motion fixed at the current estimate: linear least squares on
+// x_earlier x K (R p + t p^T pi) = 0, refined by Gauss-Newton on the
+// reprojection error. Its covariance follows the linearised solution
+// pi = g(z, motion):  P_pp = c N^-1 + G P_mm G^T (c >= 1 inflation), P_px = G P_mx, with
+// N = sum J_pi^T W J_pi and G = -N^-1 sum J_pi^T W J_m.
+bool PlaneEkf::AddPlane(const PlaneObservation& obs) {
+  const size_t m = obs.x_later_px.size();
+  if (m < 4) return false;
+  Eigen::MatrixXd A(3 * m, 3);
+  Eigen::VectorXd b(3 * m);
+  const Eigen::Vector3d Kt = K_ * t_;
+  for (size_t j = 0; j < m; ++j) {
+    const Eigen::Vector3d p = K_inv_ * obs.x_later_px[j].homogeneous();
+    const Eigen::Matrix3d xe = Skew(obs.x_earlier_px[j].homogeneous());
+    A.block<3, 3>(3 * j, 0) = xe * Kt * p.transpose();
+    b.segment<3>(3 * j) = -xe * K_ * R_ * p;
+  }
+  Eigen::Vector3d pi = A.colPivHouseholderQr().solve(b);
+  if (!pi.allFinite()) return false;
+  Eigen::Matrix3d N;
+  Eigen::Matrix<double, 3, 6> JtWJm;
+  for (int iter = 0; iter < 5; ++iter) {
+    N.setZero();
+    JtWJm.setZero();
+    Eigen::Vector3d g = Eigen::Vector3d::Zero();
+    int in_front = 0;
+    for (size_t j = 0; j < m; ++j) {
+      Eigen::Vector2d z;
+      Eigen::Matrix<double, 2, 3> d_theta, d_t, d_pi;
+      if (!ObservePoint(K_, K_inv_, R_, t_, pi, obs.x_later_px[j], &z, &d_theta, &d_t, &d_pi)) {
+        continue;
+      }
+      ++in_front;
+      const double w =
+          1.0 / (obs.variance_px2[j] + options_.extra_sigma_px * options_.extra_sigma_px);
+      N += w * d_pi.transpose() * d_pi;
+      JtWJm.leftCols<3>() += w * d_pi.transpose() * d_theta;
+      JtWJm.rightCols<3>() += w * d_pi.transpose() * d_t;
+      g += w * d_pi.transpose() * (obs.x_earlier_px[j] - z);
+    }
+    if (in_front < static_cast<int>(0.9 * m)) return false;  // plane behind the camera
+    const Eigen::LDLT<Eigen::Matrix3d> ldlt(N);
+    if (ldlt.info() != Eigen::Success) return false;
+    const Eigen::Vector3d step = ldlt.solve(g);
+    if (!step.allFinite()) return false;
+    pi += step;
+    if (step.norm() < 1e-9 * pi.norm()) break;
+  }
+  Eigen::Matrix3d N_inv;
+  {
+    Eigen::LLT<Eigen::Matrix3d> llt(N);
+    if (llt.info() != Eigen::Success) return false;
+    N_inv = llt.solve(Eigen::Matrix3d::Identity());
+  }
+  const Eigen::Matrix<double, 3, 6> G = -N_inv * JtWJm;
+  const int n = static_cast<int>(P_.rows());
+  // Motion (dtheta, dt) rows of P against the whole state.
+  const Eigen::MatrixXd P_mx = P_.middleRows(kTheta, 6);
+  // Inflate only the part from the correspondences' noise: the part carried
+  // over from the motion is exactly correlated with it (scale, rotation), and
+  // inflating it would cut the plane's scale loose from the trajectory's.
+  const Eigen::Matrix3d P_pp =
+      options_.init_inflation * N_inv + G * P_mx.middleCols(kTheta, 6) * G.transpose();
+  // Gate on what the correspondences determine (the motion-borne part moves
+  // with the trajectory's scale and is no reason to wait).
+  const double rel_std = std::sqrt(options_.init_inflation * N_inv.trace() / 3.0) / pi.norm();
+  if (!(rel_std <= options_.max_init_rel_std)) return false;
+  Eigen::MatrixXd P = Eigen::MatrixXd::Zero(n + 3, n + 3);
+  P.topLeftCorner(n, n) = P_;
+  P.block(n, 0, 3, n) = G * P_mx;
+  P.block(0, n, n, 3) = P.block(n, 0, 3, n).transpose();
+  P.block<3, 3>(n, n) = P_pp;
+  P_ = std::move(P);
+  planes_.push_back({obs.track_id, pi, 1});
+  return true;
+}
+
+Status PlaneEkf::Update(const std::vector<PlaneObservation>& observations, UpdateReport* report) {
+  if (!initialized_) return FailedPreconditionError("EKF not initialised");
+  UpdateReport local;
+  UpdateReport& rep = report != nullptr ? *report : local;
+  rep = UpdateReport();
+  for (const PlaneObservation& o : observations) {
+    if (o.x_later_px.size() != o.x_earlier_px.size() ||
+        o.x_later_px.size() != o.variance_px2.size()) {
+      return InvalidArgumentError("plane observation with mismatched correspondence arrays");
+    }
+  }
+  // 1. Delete planes that found no correspondence set.
+  std::set<int> observed_ids;
+  for (const PlaneObservation& o : observations) observed_ids.insert(o.track_id);
+  for (size_t i = planes_.size(); i-- > 0;) {
+    if (!observed_ids.count(planes_[i].track_id)) {
+      RemovePlane(i);
+      ++rep.planes_removed;
+    }
+  }
+  // 2. Update with the tracked planes' observations.
+  std::vector<std::pair<size_t, const PlaneObservation*>> tracked;
+  std::vector<const PlaneObservation*> fresh;
+  for (const PlaneObservation& o : observations) {
+    auto it = std::find_if(planes_.begin(), planes_.end(),
+                           [&](const PlaneTrack& p) { return p.track_id == o.track_id; });
+    if (it == planes_.end()) {
+      fresh.push_back(&o);
+    } else {
+      tracked.emplace_back(static_cast<size_t>(it - planes_.begin()), &o);
+    }
+  }
+  rep.skipped = tracked.empty();
+  if (!tracked.empty()) {
+    const int n = static_cast<int>(P_.rows());
+    Eigen::MatrixXd P_inv;
+    if (!InverseSpd(P_, &P_inv)) {
+      return InternalError("EKF prior covariance is not positive definite; update skipped");
+    }
+    const Eigen::Matrix3d R0 = R_;
+    const Eigen::Vector3d t0 = t_, w0 = w_, v0 = v_;
+    std::vector<Eigen::Vector3d> pi0;
+    for (const PlaneTrack& p : planes_) pi0.push_back(p.pi);
+    const double extra2 = options_.extra_sigma_px * options_.extra_sigma_px;
+
+    Eigen::MatrixXd info;
+    for (int iter = 0; iter < std::max(1, options_.iterations); ++iter) {
+      // e = x - x_prior.
+      Eigen::VectorXd e(n);
+      e.segment<3>(kTheta) = LogSO3(R0.transpose() * R_);
+      e.segment<3>(kT) = t_ - t0;
+      e.segment<3>(kW) = w_ - w0;
+      e.segment<3>(kV) = v_ - v0;
+      for (size_t i = 0; i < planes_.size(); ++i)
+        e.segment<3>(PlaneOffset(i)) = planes_[i].pi - pi0[i];
+      info = P_inv;
+      Eigen::VectorXd rhs = -P_inv * e;
+      double sq_sum = 0;
+      int count = 0;
+      for (const auto& [index, obs] : tracked) {
+        const int o = PlaneOffset(index);
+        for (size_t j = 0; j < obs->x_later_px.size(); ++j) {
+          Eigen::Vector2d z;
+          Eigen::Matrix<double, 2, 9> J;
+          Eigen::Matrix<double, 2, 3> d_theta, d_t, d_pi;
+          if (!ObservePoint(K_, K_inv_, R_, t_, planes_[index].pi, obs->x_later_px[j], &z, &d_theta,
+                            &d_t, &d_pi)) {
+            continue;
+          }
+          J << d_theta, d_t, d_pi;
+          const Eigen::Vector2d r = obs->x_earlier_px[j] - z;
+          const double var = obs->variance_px2[j] + extra2;
+          double w = 1.0 / var;
+          const double norm_r = r.norm() / std::sqrt(var);
+          if (options_.huber_k > 0 && norm_r > options_.huber_k) w *= options_.huber_k / norm_r;
+          const Eigen::Matrix<double, 9, 9> JtJ = w * J.transpose() * J;
+          const Eigen::Matrix<double, 9, 1> Jtr = w * J.transpose() * r;
+          info.block<6, 6>(kTheta, kTheta) += JtJ.topLeftCorner<6, 6>();
+          info.block<6, 3>(kTheta, o) += JtJ.topRightCorner<6, 3>();
+          info.block<3, 6>(o, kTheta) += JtJ.bottomLeftCorner<3, 6>();
+          info.block<3, 3>(o, o) += JtJ.bottomRightCorner<3, 3>();
+          rhs.segment<6>(kTheta) += Jtr.head<6>();
+          rhs.segment<3>(o) += Jtr.tail<3>();
+          sq_sum += r.squaredNorm();
+          ++count;
+        }
+      }
+      rep.measurements = count;
+      Eigen::LLT<Eigen::MatrixXd> llt(info);
+      if (llt.info() != Eigen::Success) {
+        R_ = R0, t_ = t0, w_ = w0, v_ = v0;
+        for (size_t i = 0; i < planes_.size(); ++i) planes_[i].pi = pi0[i];
+        return InternalError("EKF information matrix is not positive definite; update skipped");
+      }
+      const Eigen::VectorXd delta = llt.solve(rhs);
+      if (!delta.allFinite()) {
+        R_ = R0, t_ = t0, w_ = w0, v_ = v0;
+        for (size_t i = 0; i < planes_.size(); ++i) planes_[i].pi = pi0[i];
+        return InternalError("EKF update diverged (non-finite step); update skipped");
+      }
+      R_ = R_ * ExpSO3(delta.segment<3>(kTheta));
+      t_ += delta.segment<3>(kT);
+      w_ += delta.segment<3>(kW);
+      v_ += delta.segment<3>(kV);
+      for (size_t i = 0; i < planes_.size(); ++i) planes_[i].pi += delta.segment<3>(PlaneOffset(i));
+      rep.rms_residual_px = count > 0 ? std::sqrt(sq_sum / count) : 0.0;
+      if (delta.norm() < 1e-10) break;
+    }
+    Eigen::MatrixXd P_new;
+    if (!InverseSpd(info, &P_new)) {
+      return InternalError("EKF posterior covariance is not positive definite");
+    }
+    P_ = std::move(P_new);
+    Symmetrize(&P_);
+    for (const auto& [index, obs] : tracked) ++planes_[index].observations;
+    rep.planes_updated = static_cast<int>(tracked.size());
+  }
+  // 3. Add the new planes with the updated motion.
+  for (const PlaneObservation* o : fresh) {
+    if (AddPlane(*o)) {
+      ++rep.planes_added;
+    } else {
+      ++rep.planes_rejected;
+    }
+  }
+  return Status::Ok();
+}
+
+}  // namespace slapse

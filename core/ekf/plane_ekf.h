@@ -1,0 +1,165 @@
+// EKF over camera motion and planes (paper Sec. VI, ALGORITHM.md §5).
+//
+// Frames and conventions (one set, used everywhere in this file):
+//  - C_k is the camera frame at anchor k (x right, y down, z forward).
+//  - The step motion of anchor k is prev_from_cur = (R_k, t_k):
+//      X_{k-1} = R_k X_k + t_k,
+//    i.e. R_k rotates C_k coordinates into C_{k-1} and t_k is the position of
+//    C_k's centre in C_{k-1}.
+//  - A plane is kept in inhomogeneous form pi = n / d in C_k, so that
+//    pi^T X = 1 for points X of the plane (n unit normal, d > 0 its distance).
+//  - Plane transition C_k -> C_{k+1}:  pi_{k+1} = R^T pi_k / (1 - pi_k^T t),
+//    with (R, t) = (R_{k+1}, t_{k+1}).
+//  - Observation: a macroblock centre x_k of the plane in anchor k maps to
+//      x_{k-1} ~ K (R_k + t_k pi^T) K^-1 x_k
+//    (X_{k-1} = R X_k + t (pi^T X_k) on the plane), which is the
+//    correspondence x_earlier ~ H x_later of core/merge.
+//  - Motion model: constant angular velocity w (rad/s) and constant velocity
+//    v (length units/s), both in the camera frame (a car's forward velocity
+//    stays forward while it turns): R_{k+1} = Exp(w dt), t_{k+1} = v dt.
+//    (The paper writes t'_{k+1} = R(r') t'_k; in the body frame constant
+//    velocity needs no rotation, so we keep v.)
+//
+// Error state (right perturbations on SO(3)): R = R_hat Exp(dtheta), all else
+// additive:  [dtheta, dt, dw, dv, dpi_1, ..., dpi_N]   (12 + 3N).
+//
+// Update: iterated EKF in information form. With prior (x-, P-) and the
+// measurements z_j (2D, noise variance s_j^2 I), each Gauss-Newton step solves
+//   (P-^-1 + sum_j H_j^T H_j / s_j^2) delta = sum_j H_j^T r_j / s_j^2 - P-^-1 e
+// (e = x - x-, r_j = z_j - h_j(x)); the sum runs over macroblocks and each
+// term touches only the 6 motion and 3 plane columns, so the cost is linear
+// in the number of macroblocks. P+ = (P-^-1 + sum H^T H / s^2)^-1 by LLT.
+#pragma once
+
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/common/camera.h"
+#include "core/common/rigid3.h"
+#include "core/common/status.h"
+
+namespace slapse {
+
+struct EkfOptions {
+  // Process noise, per sqrt(second) (random walks).
+  double angular_accel_rad_s2 = 0.5;  // change of w
+  double relative_accel_per_s = 0.5;  // change of v, as a fraction of |v|
+  // Deviation of one step from constant velocity (vibration, bumps).
+  double step_rotation_rad = 0.003;
+  double step_translation_rel = 0.05;  // fraction of |t|
+  double plane_rel = 1e-3;             // planes are static: tiny, relative to |pi|
+  // Added in quadrature to every macroblock's merged-MV variance (model error
+  // of a 16x16 block copy on a plane), px.
+  double extra_sigma_px = 0.25;
+  // Huber threshold on normalised residuals (robust IRLS weights), 0 = off.
+  double huber_k = 2.0;
+  int iterations = 3;  // Gauss-Newton steps per update (1 = plain EKF)
+  // New planes: inflation of the covariance from their correspondences, and
+  // the largest relative standard deviation of |pi| (given the motion) for a
+  // plane to be added at all.
+  double init_inflation = 4.0;
+  double max_init_rel_std = 0.25;
+  // Initial uncertainty of the velocities at initialisation.
+  double init_angular_velocity_rad_s = 0.2;
+  double init_velocity_rel = 0.3;  // fraction of |v|
+};
+
+// One plane's macroblock correspondences between the previous anchor and the
+// current one.
+struct PlaneObservation {
+  int track_id = -1;
+  std::vector<Eigen::Vector2d> x_later_px;    // in C_k (current anchor)
+  std::vector<Eigen::Vector2d> x_earlier_px;  // in C_{k-1}
+  std::vector<double> variance_px2;           // merged-MV variance per axis (Lemma 2)
+};
+
+struct PlaneTrack {
+  int track_id = -1;
+  Eigen::Vector3d pi = Eigen::Vector3d::Zero();  // n / d in the current camera frame
+  int observations = 0;                          // updates it took part in
+};
+
+// The nominal state: step motion, velocities and planes (n / d in C_k).
+struct EkfState {
+  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();  // prev_from_cur rotation of the last step
+  Eigen::Vector3d t = Eigen::Vector3d::Zero();      // prev_from_cur translation of the last step
+  Eigen::Vector3d w = Eigen::Vector3d::Zero();      // angular velocity, rad/s, camera frame
+  Eigen::Vector3d v = Eigen::Vector3d::Zero();      // velocity, length units/s, camera frame
+  std::vector<Eigen::Vector3d> pis;                 // planes
+};
+
+struct UpdateReport {
+  int planes_updated = 0, planes_added = 0, planes_removed = 0, planes_rejected = 0;
+  int measurements = 0;
+  double rms_residual_px = 0.0;  // after the update
+  bool skipped = false;          // no tracked plane observed
+};
+
+class PlaneEkf {
+ public:
+  PlaneEkf(const Intrinsics& intrinsics, EkfOptions options = {});
+
+  // Starts the filter from the first anchor pair's motion (scale fixed by the
+  // caller: |t| = 1 up to scale, or metric) and its time gap.
+  Status Initialize(const Rigid3d& prev_from_cur, double dt_s);
+  bool initialized() const { return initialized_; }
+
+  // Propagates to the next anchor, dt_s after the current one.
+  Status Predict(double dt_s);
+
+  // Deletes tracked planes without an observation, updates with the tracked
+  // ones (skipped when there are none), then adds untracked ones whose plane
+  // is well determined by the updated motion. A numerically failing update
+  // leaves the state as predicted and returns INTERNAL.
+  Status Update(const std::vector<PlaneObservation>& observations, UpdateReport* report);
+
+  // Multiplies every length in the state by `s` (t, v scale by s; pi by 1/s).
+  void Rescale(double s);
+
+  Rigid3d prev_from_cur() const { return Rigid3d(R_, t_); }
+  const Eigen::Vector3d& angular_velocity_rad_s() const { return w_; }
+  const Eigen::Vector3d& velocity_per_s() const { return v_; }
+  const std::vector<PlaneTrack>& planes() const { return planes_; }
+  // Covariance of the error state (12 + 3N square).
+  const Eigen::MatrixXd& covariance() const { return P_; }
+  // Covariance block of one plane (3x3), by index into planes().
+  Eigen::Matrix3d PlaneCovariance(size_t index) const;
+
+  // --- Model functions, public for the Jacobian tests. ---
+  // The motion model applied to a nominal state, and (optionally) its
+  // error-state Jacobian F (12 + 3N square): dx_new = F dx_old.
+  static EkfState PredictState(const EkfState& state, double dt_s, Eigen::MatrixXd* F);
+  // x (+) delta on the error state's manifold (right perturbation on SO(3)).
+  static EkfState Retract(const EkfState& state, const Eigen::VectorXd& delta);
+  // Plane transition and its Jacobians w.r.t. pi, dtheta (right perturbation
+  // of R) and t.
+  static Eigen::Vector3d TransitionPlane(const Eigen::Vector3d& pi, const Eigen::Matrix3d& R,
+                                         const Eigen::Vector3d& t, Eigen::Matrix3d* d_pi,
+                                         Eigen::Matrix3d* d_theta, Eigen::Matrix3d* d_t);
+  // Predicted earlier-anchor pixel of later-anchor pixel x and its Jacobians
+  // w.r.t. dtheta, t, pi. Returns false when the point maps behind the camera.
+  static bool ObservePoint(const Eigen::Matrix3d& K, const Eigen::Matrix3d& K_inv,
+                           const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
+                           const Eigen::Vector3d& pi, const Eigen::Vector2d& x_later,
+                           Eigen::Vector2d* x_earlier, Eigen::Matrix<double, 2, 3>* d_theta,
+                           Eigen::Matrix<double, 2, 3>* d_t, Eigen::Matrix<double, 2, 3>* d_pi);
+
+ private:
+  static constexpr int kMotionDim = 12;
+  int PlaneOffset(size_t index) const { return kMotionDim + 3 * static_cast<int>(index); }
+  void RemovePlane(size_t index);
+  bool AddPlane(const PlaneObservation& obs);
+
+  Intrinsics intrinsics_;
+  Eigen::Matrix3d K_, K_inv_;
+  EkfOptions options_;
+  bool initialized_ = false;
+  Eigen::Matrix3d R_ = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d t_ = Eigen::Vector3d::Zero(), w_ = Eigen::Vector3d::Zero(),
+                  v_ = Eigen::Vector3d::Zero();
+  std::vector<PlaneTrack> planes_;
+  Eigen::MatrixXd P_;
+};
+
+}  // namespace slapse

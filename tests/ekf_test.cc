@@ -1,0 +1,295 @@
+// The EKF's analytic Jacobians against finite differences, and the filter on
+// exact synthetic plane correspondences with known motion.
+#include "core/ekf/plane_ekf.h"
+
+#include <cmath>
+#include <random>
+
+#include <gtest/gtest.h>
+
+#include "core/common/so3.h"
+
+namespace slapse {
+namespace {
+
+constexpr double kStep = 1e-6;
+
+// Central difference of f along a perturbation applied by `perturb`.
+template <typename F, typename P>
+Eigen::MatrixXd NumericJacobian(F f, P perturb, int in_dim) {
+  const Eigen::VectorXd f0 = f(perturb(Eigen::VectorXd::Zero(in_dim)));
+  Eigen::MatrixXd J(f0.size(), in_dim);
+  for (int k = 0; k < in_dim; ++k) {
+    Eigen::VectorXd d = Eigen::VectorXd::Zero(in_dim);
+    d[k] = kStep;
+    J.col(k) = (f(perturb(d)) - f(perturb(-d))) / (2 * kStep);
+  }
+  return J;
+}
+
+struct Fixture {
+  Eigen::Matrix3d R = ExpSO3(Eigen::Vector3d(0.02, -0.05, 0.01));
+  Eigen::Vector3d t = Eigen::Vector3d(0.1, -0.03, 0.9);
+  Eigen::Vector3d pi = Eigen::Vector3d(0.12, -0.02, 0.05);  // facade ~8 m to the right
+  Intrinsics K = Intrinsics::FromHorizontalFov(640, 480, 70);
+};
+
+TEST(EkfJacobians, PlaneTransitionMatchesFiniteDifferences) {
+  Fixture fx;
+  Eigen::Matrix3d d_pi, d_theta, d_t;
+  PlaneEkf::TransitionPlane(fx.pi, fx.R, fx.t, &d_pi, &d_theta, &d_t);
+  auto f = [&](const std::tuple<Eigen::Vector3d, Eigen::Matrix3d, Eigen::Vector3d>& a) {
+    return Eigen::VectorXd(PlaneEkf::TransitionPlane(std::get<0>(a), std::get<1>(a), std::get<2>(a),
+                                                     nullptr, nullptr, nullptr));
+  };
+  const Eigen::MatrixXd n_pi = NumericJacobian(
+      f,
+      [&](const Eigen::VectorXd& d) {
+        return std::make_tuple(Eigen::Vector3d(fx.pi + d), fx.R, fx.t);
+      },
+      3);
+  const Eigen::MatrixXd n_theta = NumericJacobian(
+      f,
+      [&](const Eigen::VectorXd& d) {
+        return std::make_tuple(fx.pi, Eigen::Matrix3d(fx.R * ExpSO3(d)), fx.t);
+      },
+      3);
+  const Eigen::MatrixXd n_t = NumericJacobian(
+      f,
+      [&](const Eigen::VectorXd& d) {
+        return std::make_tuple(fx.pi, fx.R, Eigen::Vector3d(fx.t + d));
+      },
+      3);
+  EXPECT_LT((n_pi - d_pi).norm(), 1e-6 * (1 + d_pi.norm())) << n_pi << "\n\n" << d_pi;
+  EXPECT_LT((n_theta - d_theta).norm(), 1e-6 * (1 + d_theta.norm())) << n_theta << "\n\n"
+                                                                     << d_theta;
+  EXPECT_LT((n_t - d_t).norm(), 1e-6 * (1 + d_t.norm())) << n_t << "\n\n" << d_t;
+}
+
+TEST(EkfJacobians, ObservationMatchesFiniteDifferences) {
+  Fixture fx;
+  const Eigen::Matrix3d K = fx.K.K(), K_inv = K.inverse();
+  for (const Eigen::Vector2d x :
+       {Eigen::Vector2d(600, 200), Eigen::Vector2d(500, 400), Eigen::Vector2d(420, 90)}) {
+    Eigen::Vector2d z;
+    Eigen::Matrix<double, 2, 3> d_theta, d_t, d_pi;
+    ASSERT_TRUE(PlaneEkf::ObservePoint(K, K_inv, fx.R, fx.t, fx.pi, x, &z, &d_theta, &d_t, &d_pi));
+    using Args = std::tuple<Eigen::Matrix3d, Eigen::Vector3d, Eigen::Vector3d>;
+    auto f = [&](const Args& a) {
+      Eigen::Vector2d out;
+      EXPECT_TRUE(PlaneEkf::ObservePoint(K, K_inv, std::get<0>(a), std::get<1>(a), std::get<2>(a),
+                                         x, &out, nullptr, nullptr, nullptr));
+      return Eigen::VectorXd(out);
+    };
+    const Eigen::MatrixXd n_theta = NumericJacobian(
+        f, [&](const Eigen::VectorXd& d) { return Args(fx.R * ExpSO3(d), fx.t, fx.pi); }, 3);
+    const Eigen::MatrixXd n_t = NumericJacobian(
+        f, [&](const Eigen::VectorXd& d) { return Args(fx.R, fx.t + d, fx.pi); }, 3);
+    const Eigen::MatrixXd n_pi = NumericJacobian(
+        f, [&](const Eigen::VectorXd& d) { return Args(fx.R, fx.t, fx.pi + d); }, 3);
+    EXPECT_LT((n_theta - d_theta).norm(), 1e-5 * (1 + d_theta.norm())) << n_theta << "\n\n"
+                                                                       << d_theta;
+    EXPECT_LT((n_t - d_t).norm(), 1e-5 * (1 + d_t.norm())) << n_t << "\n\n" << d_t;
+    EXPECT_LT((n_pi - d_pi).norm(), 1e-5 * (1 + d_pi.norm())) << n_pi << "\n\n" << d_pi;
+  }
+}
+
+TEST(EkfJacobians, PredictionMatchesFiniteDifferencesOfTheErrorState) {
+  Fixture fx;
+  EkfState x;
+  x.R = fx.R;
+  x.t = fx.t;
+  x.w = Eigen::Vector3d(0.01, 0.3, -0.02);
+  x.v = Eigen::Vector3d(0.2, 0.05, 7.0);
+  x.pis = {fx.pi, Eigen::Vector3d(0, -0.7, 0.01), Eigen::Vector3d(-0.1, 0.0, 0.02)};
+  const double dt = 4.0 / 30.0;
+  Eigen::MatrixXd F;
+  const EkfState y0 = PlaneEkf::PredictState(x, dt, &F);
+  const int n = 12 + 3 * static_cast<int>(x.pis.size());
+  // Error of the predicted state relative to y0, in the same error-state chart.
+  auto boxminus = [&](const EkfState& y) {
+    Eigen::VectorXd e(n);
+    e.segment<3>(0) = LogSO3(y0.R.transpose() * y.R);
+    e.segment<3>(3) = y.t - y0.t;
+    e.segment<3>(6) = y.w - y0.w;
+    e.segment<3>(9) = y.v - y0.v;
+    for (size_t i = 0; i < y.pis.size(); ++i) e.segment<3>(12 + 3 * i) = y.pis[i] - y0.pis[i];
+    return e;
+  };
+  const Eigen::MatrixXd numeric = NumericJacobian(
+      [&](const EkfState& xp) { return boxminus(PlaneEkf::PredictState(xp, dt, nullptr)); },
+      [&](const Eigen::VectorXd& d) { return PlaneEkf::Retract(x, d); }, n);
+  EXPECT_LT((numeric - F).norm(), 1e-5 * (1 + F.norm()))
+      << "max diff " << (numeric - F).cwiseAbs().maxCoeff();
+}
+
+// ---------- Filter on exact synthetic correspondences ----------
+
+struct WorldPlane {
+  Eigen::Vector3d n_world;  // unit normal, n . X = d
+  double d;
+};
+
+// Camera poses of a car driving forward along z with a gentle left turn
+// (world frame = first camera frame here: y down).
+std::vector<Rigid3d> DrivePoses(int steps, double step_m) {
+  std::vector<Rigid3d> world_from_cam;
+  Eigen::Vector3d pos = Eigen::Vector3d::Zero();
+  double yaw = 0;
+  for (int k = 0; k <= steps; ++k) {
+    const Eigen::Matrix3d R = ExpSO3(Eigen::Vector3d(0, yaw, 0));
+    world_from_cam.emplace_back(R, pos);
+    yaw -= 0.01;  // turning left
+    pos += R * Eigen::Vector3d(0, 0, step_m);
+  }
+  return world_from_cam;
+}
+
+// Exact correspondences of a plane on a 16-px macroblock grid: x_later in
+// camera k, x_earlier in camera k-1, restricted to plane points inside a
+// lateral band (so several planes share the image).
+PlaneObservation Observe(const Intrinsics& K, const Rigid3d& world_from_prev,
+                         const Rigid3d& world_from_cur, const WorldPlane& plane, int track_id,
+                         double noise_px, std::mt19937_64& rng) {
+  PlaneObservation obs;
+  obs.track_id = track_id;
+  std::normal_distribution<double> noise(0, noise_px);
+  const Rigid3d cur_from_world = world_from_cur.Inverse();
+  const Rigid3d prev_from_world = world_from_prev.Inverse();
+  for (int row = 0; row < 30; ++row) {
+    for (int col = 0; col < 40; ++col) {
+      const Eigen::Vector2d x(16 * col + 7.5, 16 * row + 7.5);
+      const Eigen::Vector3d ray_cam = K.Unproject(x);
+      const Eigen::Vector3d ray_w = world_from_cur.rotation * ray_cam;
+      const Eigen::Vector3d c_w = world_from_cur.translation;
+      const double denom = plane.n_world.dot(ray_w);
+      if (std::abs(denom) < 1e-9) continue;
+      const double s = (plane.d - plane.n_world.dot(c_w)) / denom;
+      if (s <= 0.5 || s > 60) continue;  // behind or too far
+      const Eigen::Vector3d X = c_w + s * ray_w;
+      if (std::abs(X.x()) > 12 || X.y() < -15) continue;  // band of the street
+      const Eigen::Vector3d Xp = prev_from_world * X;
+      if (Xp.z() < 0.5) continue;
+      const Eigen::Vector2d xp = K.Project(Xp);
+      if (xp.x() < 0 || xp.y() < 0 || xp.x() > 639 || xp.y() > 479) continue;
+      obs.x_later_px.push_back(x);
+      obs.x_earlier_px.push_back(xp + Eigen::Vector2d(noise(rng), noise(rng)));
+      obs.variance_px2.push_back(noise_px * noise_px);
+    }
+  }
+  (void)cur_from_world;
+  return obs;
+}
+
+TEST(PlaneEkfTest, TracksMotionAndPlanesOnExactCorrespondences) {
+  const Intrinsics K = Intrinsics::FromHorizontalFov(640, 480, 70);
+  const double dt = 4.0 / 30.0, step_m = 1.2;
+  const int steps = 25;
+  const auto poses = DrivePoses(steps, step_m);
+  // Road 1.5 m below the camera (y down), facades 6 m left and 8 m right.
+  const std::vector<WorldPlane> planes = {
+      {{0, -1, 0}, -1.5}, {{1, 0, 0}, -6.0}, {{-1, 0, 0}, -8.0}};
+  std::mt19937_64 rng(5);
+  EkfOptions opts;
+  opts.extra_sigma_px = 0.1;
+  PlaneEkf ekf(K, opts);
+  ASSERT_TRUE(ekf.Initialize(poses[0].Inverse() * poses[1], dt).ok());
+  Rigid3d world_from_cam = poses[1];  // integrated from the filter's steps
+  for (int k = 1; k <= steps; ++k) {
+    if (k > 1) {
+      ASSERT_TRUE(ekf.Predict(dt).ok());
+    }
+    std::vector<PlaneObservation> obs;
+    for (size_t i = 0; i < planes.size(); ++i) {
+      obs.push_back(Observe(K, poses[k - 1], poses[k], planes[i], static_cast<int>(i), 0.2, rng));
+      ASSERT_GT(obs.back().x_later_px.size(), 20u) << "plane " << i << " step " << k;
+    }
+    UpdateReport report;
+    ASSERT_TRUE(ekf.Update(obs, &report).ok());
+    if (k == 1) {
+      EXPECT_TRUE(report.skipped);
+      EXPECT_EQ(report.planes_added, 3);
+    } else {
+      EXPECT_EQ(report.planes_updated, 3);
+      EXPECT_LT(report.rms_residual_px, 0.5);
+      world_from_cam = world_from_cam * ekf.prev_from_cur();
+    }
+    // Covariance: symmetric, positive definite.
+    const Eigen::MatrixXd& P = ekf.covariance();
+    EXPECT_LT((P - P.transpose()).norm(), 1e-9 * P.norm());
+    EXPECT_EQ(Eigen::LLT<Eigen::MatrixXd>(P).info(), Eigen::Success);
+  }
+  // Step motion and velocity close to the truth.
+  const Rigid3d true_step = poses[steps - 1].Inverse() * poses[steps];
+  EXPECT_LT((ekf.prev_from_cur().translation - true_step.translation).norm(), 0.02 * step_m);
+  EXPECT_LT(LogSO3(ekf.prev_from_cur().R().transpose() * true_step.R()).norm(), 2e-3);
+  // Accumulated position after 25 steps (30 m): within 1 %.
+  EXPECT_LT((world_from_cam.translation - poses[steps].translation).norm(), 0.01 * steps * step_m);
+  // Planes in the current camera frame: depth within 2 %, normal within 1 degree.
+  const Rigid3d cam_from_world = poses[steps].Inverse();
+  ASSERT_EQ(ekf.planes().size(), 3u);
+  for (const PlaneTrack& track : ekf.planes()) {
+    const WorldPlane& wp = planes[track.track_id];
+    const Eigen::Vector3d n_c = cam_from_world.rotation * wp.n_world;
+    const double d_c = wp.d + n_c.dot(cam_from_world.translation);  // n_c . X_c = d_c
+    const Eigen::Vector3d true_pi = n_c / d_c;
+    const double depth = 1.0 / track.pi.norm(), true_depth = 1.0 / true_pi.norm();
+    EXPECT_NEAR(depth, true_depth, 0.02 * true_depth) << "plane " << track.track_id;
+    EXPECT_LT(std::acos(std::min(1.0, track.pi.normalized().dot(true_pi.normalized()))), M_PI / 180)
+        << "plane " << track.track_id;
+  }
+}
+
+TEST(PlaneEkfTest, PlaneLifeCycleAndBadInput) {
+  const Intrinsics K = Intrinsics::FromHorizontalFov(640, 480, 70);
+  const auto poses = DrivePoses(3, 1.0);
+  std::mt19937_64 rng(6);
+  PlaneEkf ekf(K);
+  EXPECT_EQ(ekf.Update({}, nullptr).code(), StatusCode::kFailedPrecondition);
+  ASSERT_TRUE(ekf.Initialize(poses[0].Inverse() * poses[1], 0.1).ok());
+  const WorldPlane road{{0, -1, 0}, -1.5}, wall{{1, 0, 0}, -6.0};
+  UpdateReport rep;
+  ASSERT_TRUE(ekf.Update({Observe(K, poses[0], poses[1], road, 7, 0.1, rng)}, &rep).ok());
+  EXPECT_TRUE(rep.skipped);
+  EXPECT_EQ(rep.planes_added, 1);
+  ASSERT_TRUE(ekf.Predict(0.1).ok());
+  // The road is lost, a wall appears: the road is deleted before the update
+  // (so nothing is tracked and the update is skipped), the wall added after.
+  ASSERT_TRUE(ekf.Update({Observe(K, poses[1], poses[2], wall, 8, 0.1, rng)}, &rep).ok());
+  EXPECT_EQ(rep.planes_removed, 1);
+  EXPECT_TRUE(rep.skipped);
+  EXPECT_EQ(rep.planes_added, 1);
+  ASSERT_EQ(ekf.planes().size(), 1u);
+  EXPECT_EQ(ekf.planes()[0].track_id, 8);
+  EXPECT_EQ(ekf.covariance().rows(), 15);
+  // Broken contract: mismatched arrays.
+  PlaneObservation bad = Observe(K, poses[2], poses[3], wall, 8, 0.1, rng);
+  bad.variance_px2.pop_back();
+  ASSERT_TRUE(ekf.Predict(0.1).ok());
+  EXPECT_EQ(ekf.Update({bad}, &rep).code(), StatusCode::kInvalidArgument);
+  // Numerically failing update: a NaN measurement returns an error, the process lives on.
+  PlaneObservation nan_obs = Observe(K, poses[2], poses[3], wall, 8, 0.1, rng);
+  nan_obs.x_earlier_px[0].x() = NAN;
+  const Status s = ekf.Update({nan_obs}, &rep);
+  EXPECT_EQ(s.code(), StatusCode::kInternal) << s.ToString();
+  EXPECT_TRUE(ekf.planes()[0].pi.allFinite());
+}
+
+TEST(PlaneEkfTest, RescaleMultipliesLengths) {
+  const Intrinsics K = Intrinsics::FromHorizontalFov(640, 480, 70);
+  const auto poses = DrivePoses(2, 1.0);
+  std::mt19937_64 rng(7);
+  PlaneEkf ekf(K);
+  ASSERT_TRUE(ekf.Initialize(poses[0].Inverse() * poses[1], 0.1).ok());
+  ASSERT_TRUE(
+      ekf.Update({Observe(K, poses[0], poses[1], {{0, -1, 0}, -1.5}, 0, 0.1, rng)}, nullptr).ok());
+  const double depth = 1.0 / ekf.planes()[0].pi.norm();
+  const Eigen::Vector3d t = ekf.prev_from_cur().translation;
+  ekf.Rescale(2.5);
+  EXPECT_NEAR(1.0 / ekf.planes()[0].pi.norm(), 2.5 * depth, 1e-9);
+  EXPECT_LT((ekf.prev_from_cur().translation - 2.5 * t).norm(), 1e-12);
+  EXPECT_EQ(Eigen::LLT<Eigen::MatrixXd>(ekf.covariance()).info(), Eigen::Success);
+}
+
+}  // namespace
+}  // namespace slapse
