@@ -1,0 +1,15 @@
+// The slapse CLI's subcommands. Each takes the arguments after its name and
+// returns the process exit code; errors are printed as one line on stderr.
+#pragma once
+
+#include <string>
+
+namespace slapse::cli {
+
+int RunMvs(int argc, char** argv);
+int RunSimulate(int argc, char** argv);
+
+// Prints "slapse <command>: <message>" on stderr and returns 1 (or 2 for usage errors).
+int Fail(const char* command, const std::string& message, int code = 1);
+
+}  // namespace slapse::cli

@@ -1,0 +1,55 @@
+// slapse: motion vectors in, trajectories and planes out.
+#include <cstdio>
+#include <cstring>
+#include <string>
+
+extern "C" {
+#include <libavutil/log.h>
+}
+
+#include "client/cli/commands.h"
+
+namespace slapse::cli {
+
+int Fail(const char* command, const std::string& message, int code) {
+  std::fprintf(stderr, "slapse %s: %s\n", command, message.c_str());
+  return code;
+}
+
+}  // namespace slapse::cli
+
+namespace {
+
+struct Command {
+  const char* name;
+  int (*run)(int, char**);
+  const char* help;
+};
+
+const Command kCommands[] = {
+    {"simulate", slapse::cli::RunSimulate,
+     "render a street drive with ground truth and encode it (MPEG-2/MPEG-4/H.264)"},
+    {"mvs", slapse::cli::RunMvs, "read a stream's motion vectors: dump, draw, summarise"},
+};
+
+void PrintUsage(FILE* out) {
+  std::fprintf(out, "usage: slapse COMMAND [options]   ('slapse COMMAND --help' for details)\n\n");
+  for (const Command& c : kCommands) std::fprintf(out, "  %-10s %s\n", c.name, c.help);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  av_log_set_level(AV_LOG_ERROR);  // decoder chatter is not for users; errors are
+  if (argc < 2 || !std::strcmp(argv[1], "--help") || !std::strcmp(argv[1], "-h") ||
+      !std::strcmp(argv[1], "help")) {
+    PrintUsage(argc < 2 ? stderr : stdout);
+    return argc < 2 ? 2 : 0;
+  }
+  for (const Command& c : kCommands) {
+    if (std::strcmp(argv[1], c.name) == 0) return c.run(argc - 2, argv + 2);
+  }
+  std::fprintf(stderr, "slapse: unknown command '%s'\n", argv[1]);
+  PrintUsage(stderr);
+  return 2;
+}

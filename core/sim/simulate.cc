@@ -1,0 +1,127 @@
+#include "core/sim/simulate.h"
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "core/sim/ground_truth.h"
+
+namespace slapse {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double Seconds(Clock::time_point a, Clock::time_point b) {
+  return std::chrono::duration<double>(b - a).count();
+}
+
+std::string Num(double v) {
+  char buf[40];
+  std::snprintf(buf, sizeof(buf), "%.17g", v);
+  return buf;
+}
+
+std::string Quote(const std::string& s) {
+  std::string out = "\"";
+  for (char c : s) {
+    if (c == '"' || c == '\\') out += '\\';
+    if (static_cast<unsigned char>(c) < 0x20) continue;
+    out += c;
+  }
+  return out + "\"";
+}
+
+}  // namespace
+
+Status SimulateDrive(const SimulateOptions& o, SimulateReport* report) {
+  if (report == nullptr) return InvalidArgumentError("SimulateDrive: null report");
+  if (o.output_dir.empty()) return InvalidArgumentError("SimulateDrive: empty output_dir");
+  if (o.video_name.empty() || o.video_name.find('/') != std::string::npos) {
+    return InvalidArgumentError("video_name must be a plain file name");
+  }
+  *report = SimulateReport();
+  auto drive_or = PrepareDrive(o);
+  if (!drive_or.ok()) return drive_or.status();
+  const Drive& drive = *drive_or;
+
+  std::error_code ec;
+  std::filesystem::create_directories(o.output_dir, ec);
+  if (ec) return UnavailableError("cannot create " + o.output_dir + ": " + ec.message());
+  const std::string video_path = (std::filesystem::path(o.output_dir) / o.video_name).string();
+
+  RenderOptions ro;
+  ro.supersampling = o.supersampling;
+  auto renderer_or = Renderer::Create(drive.scene, drive.intrinsics, ro);
+  if (!renderer_or.ok()) return renderer_or.status();
+  Renderer& renderer = **renderer_or;
+
+  EncoderOptions eo = o.encoder;
+  eo.fps = o.fps;
+  auto encoder_or = VideoEncoder::Open(video_path, o.width_px, o.height_px, eo);
+  if (!encoder_or.ok()) return encoder_or.status();
+  VideoEncoder& encoder = **encoder_or;
+
+  GroundTruth gt;
+  gt.intrinsics = drive.intrinsics;
+  gt.planes = drive.scene.planes;
+  gt.fps = o.fps;
+  RenderedFrame frame;
+  const size_t n = drive.path.world_from_cam.size();
+  for (size_t i = 0; i < n; ++i) {
+    const auto t0 = Clock::now();
+    SLAPSE_RETURN_IF_ERROR(renderer.Render(drive.path.world_from_cam[i], &frame));
+    const auto t1 = Clock::now();
+    SLAPSE_RETURN_IF_ERROR(encoder.Write(frame.bgr));
+    const auto t2 = Clock::now();
+    report->render_s += Seconds(t0, t1);
+    report->encode_s += Seconds(t1, t2);
+    GtFrame f;
+    f.timestamp_s = drive.path.timestamps_s[i];
+    f.world_from_cam = drive.path.world_from_cam[i];
+    f.mb_labels = frame.mb_labels;
+    gt.mb_cols = frame.mb_cols;
+    gt.mb_rows = frame.mb_rows;
+    gt.frames.push_back(std::move(f));
+  }
+  const auto t3 = Clock::now();
+  SLAPSE_RETURN_IF_ERROR(encoder.Finish());
+  report->encode_s += Seconds(t3, Clock::now());
+  SLAPSE_RETURN_IF_ERROR(SaveGroundTruth(gt, o.output_dir));
+
+  report->frames = static_cast<int>(n);
+  report->distance_m = drive.path.distance_m;
+  report->num_planes = static_cast<int>(drive.scene.planes.size());
+  report->video_path = video_path;
+
+  // The full meta.json (a superset of what SaveGroundTruth wrote).
+  std::ostringstream meta;
+  meta << "{\n  \"seed\": " << o.seed << ",\n  \"video\": " << Quote(o.video_name)
+       << ",\n  \"codec\": " << Quote(VideoCodecName(eo.codec))
+       << ",\n  \"b_frames\": " << eo.b_frames << ",\n  \"gop_size\": " << eo.gop_size
+       << ",\n  \"quality\": " << eo.quality
+       << ",\n  \"mpeg4_qpel\": " << (eo.mpeg4_qpel ? "true" : "false")
+       << ",\n  \"fps\": " << Num(o.fps) << ",\n  \"frames\": " << n
+       << ",\n  \"width_px\": " << o.width_px << ",\n  \"height_px\": " << o.height_px
+       << ",\n  \"hfov_deg\": " << Num(o.hfov_deg) << ",\n  \"mb_cols\": " << gt.mb_cols
+       << ",\n  \"mb_rows\": " << gt.mb_rows << ",\n  \"duration_s\": " << Num(o.duration_s)
+       << ",\n  \"min_speed_mps\": " << Num(o.min_speed_mps)
+       << ",\n  \"max_speed_mps\": " << Num(o.max_speed_mps)
+       << ",\n  \"trees\": " << (o.trees ? "true" : "false")
+       << ",\n  \"supersampling\": " << o.supersampling
+       << ",\n  \"camera_height_m\": " << Num(drive.path.camera_height_m)
+       << ",\n  \"pitch_down_deg\": " << Num(drive.path.pitch_down_deg)
+       << ",\n  \"distance_m\": " << Num(drive.path.distance_m)
+       << ",\n  \"num_planes\": " << drive.scene.planes.size()
+       << ",\n  \"render_s\": " << Num(report->render_s)
+       << ",\n  \"encode_s\": " << Num(report->encode_s) << "\n}\n";
+  const auto meta_path = std::filesystem::path(o.output_dir) / "meta.json";
+  std::ofstream out(meta_path, std::ios::trunc);
+  out << meta.str();
+  out.close();
+  if (!out) return DataLossError("failed writing " + meta_path.string());
+  return Status::Ok();
+}
+
+}  // namespace slapse
