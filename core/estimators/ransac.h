@@ -1,0 +1,279 @@
+// A generic, deterministic RANSAC (in the shape of COLMAP's) with an optional
+// sampling subset, as SLAPSE's plane tracking needs (ALGORITHM.md §4).
+//
+// An Estimator provides:
+//   using X_t = ...;  using Y_t = ...;  using M_t = ...;
+//   static constexpr int kMinNumSamples;
+//   // Fits zero or more models to the given points: a minimal sample when
+//   // X.size() == kMinNumSamples, a least-squares fit when larger. Degenerate
+//   // input yields no model (models->empty()).
+//   static void Estimate(const std::vector<X_t>& X, const std::vector<Y_t>& Y,
+//                        std::vector<M_t>* models);
+//   // One squared residual per point (may be +infinity).
+//   static void Residuals(const std::vector<X_t>& X, const std::vector<Y_t>& Y,
+//                         const M_t& model, std::vector<double>* squared_residuals);
+//
+// Semantics of Ransac::Estimate(X, Y, sample_from):
+//  - Minimal samples are drawn only from the indices in `sample_from` (all
+//    points when null); every hypothesis is scored on ALL points. A point is an
+//    inlier iff squared_residual <= max_error^2. Hypotheses are ranked by the
+//    MSAC cost sum_i min(r_i^2, max_error^2) over all points (an inlier count
+//    that also rewards small residuals).
+//  - The number of trials adapts to the inlier ratio *within the sampling set*
+//    (that is the set the next sample comes from):
+//      N = log(1 - confidence) / log(1 - w^kMinNumSamples),
+//    clamped to [min_num_trials, max_num_trials].
+//  - With local_optimization (LO-RANSAC), every new so-far-best hypothesis is
+//    refitted by the estimator's least-squares Estimate on its inliers at a
+//    shrinking threshold (3, 2, 1.5 x max_error, then max_error until the
+//    inlier set is stable, at most kMaxLocalOptimizationIterations times). A
+//    refit is kept iff it lowers the MSAC cost at max_error (a pure inlier count would keep
+//    a noisy minimal-sample model whenever the refit loses one borderline
+//    inlier); the polished model then competes in the ranking, so hypotheses
+//    are not ranked by the luck of their minimal sample's noise.
+//    The reported support and mask are those of the final model.
+//  - Deterministic: a fresh std::mt19937_64 seeded with `seed` per call, and an
+//    own unbiased index helper (std::uniform_int_distribution's output is
+//    implementation-defined, so results would differ between standard libraries).
+//  - Failure (success = false, empty mask, num_trials may be > 0): X and Y sizes
+//    differ, max_error <= 0, an index in sample_from is out of range, fewer than
+//    kMinNumSamples distinct indices to sample from, or no hypothesis had at
+//    least kMinNumSamples inliers (e.g. every sample was degenerate).
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <random>
+#include <utility>
+#include <vector>
+
+namespace slapse {
+
+struct RansacOptions {
+  // Inlier threshold in the unit of the estimator's residual (not squared); > 0.
+  double max_error = 0.0;
+  // Probability that at least one all-inlier sample was drawn when stopping.
+  double confidence = 0.999;
+  int min_num_trials = 10;
+  int max_num_trials = 2000;
+  uint64_t seed = 0;
+  // Refit on all inliers after the random search (see file comment).
+  bool local_optimization = true;
+};
+
+template <typename Model>
+struct RansacReport {
+  bool success = false;
+  int num_trials = 0;             // hypotheses sampled (minimal samples drawn)
+  int support = 0;                // number of inliers among ALL points
+  std::vector<char> inlier_mask;  // one entry per point (1 = inlier); empty on failure
+  Model model{};                  // meaningful only when success
+};
+
+namespace internal {
+
+// Uniform integer in [0, n) from a 64-bit engine, without modulo bias
+// (rejection sampling on the top of the range). n > 0.
+inline uint64_t UniformIndex(std::mt19937_64& rng, uint64_t n) {
+  const uint64_t limit = std::numeric_limits<uint64_t>::max() -
+                         std::numeric_limits<uint64_t>::max() % n;  // multiple of n
+  uint64_t r;
+  do {
+    r = rng();
+  } while (r >= limit);
+  return r % n;
+}
+
+// Trials needed to draw, with probability `confidence`, one sample of
+// `sample_size` inliers when a fraction `inlier_ratio` of the pool are inliers.
+inline int RansacNumTrials(double inlier_ratio, int sample_size, double confidence,
+                           int min_num_trials, int max_num_trials) {
+  if (inlier_ratio <= 0.0) return max_num_trials;
+  if (inlier_ratio >= 1.0) return min_num_trials;
+  const double p_all_inliers = std::pow(inlier_ratio, sample_size);
+  const double denom = std::log1p(-p_all_inliers);
+  if (!(denom < 0.0)) return max_num_trials;
+  const double num = std::log1p(-std::min(confidence, 1.0 - 1e-15));
+  const double n = std::ceil(num / denom);
+  if (!(n < static_cast<double>(max_num_trials))) return max_num_trials;
+  return std::max(min_num_trials, static_cast<int>(n));
+}
+
+}  // namespace internal
+
+template <typename Estimator>
+class Ransac {
+ public:
+  using X_t = typename Estimator::X_t;
+  using Y_t = typename Estimator::Y_t;
+  using M_t = typename Estimator::M_t;
+  using Report = RansacReport<M_t>;
+
+  static constexpr int kMaxLocalOptimizationIterations = 10;
+  static constexpr double kLoThresholdMultipliers[] = {3.0, 2.0, 1.5};
+
+  explicit Ransac(const RansacOptions& options) : options_(options) {}
+
+  Report Estimate(const std::vector<X_t>& X, const std::vector<Y_t>& Y,
+                  const std::vector<int>* sample_from = nullptr) const {
+    Report report;
+    constexpr int kSample = Estimator::kMinNumSamples;
+    const int num_points = static_cast<int>(X.size());
+    if (X.size() != Y.size() || !(options_.max_error > 0.0)) return report;
+
+    // The pool to sample from: distinct, in-range indices.
+    std::vector<int> pool;
+    if (sample_from == nullptr) {
+      pool.resize(num_points);
+      for (int i = 0; i < num_points; ++i) pool[i] = i;
+    } else {
+      pool = *sample_from;
+      for (int i : pool) {
+        if (i < 0 || i >= num_points) return report;
+      }
+      std::sort(pool.begin(), pool.end());
+      pool.erase(std::unique(pool.begin(), pool.end()), pool.end());
+    }
+    const int pool_size = static_cast<int>(pool.size());
+    if (pool_size < kSample) return report;
+
+    const double max_sq_error = options_.max_error * options_.max_error;
+    const int min_trials = std::max(0, options_.min_num_trials);
+    const int max_trials = std::max(min_trials, options_.max_num_trials);
+
+    std::mt19937_64 rng(options_.seed);
+    std::vector<X_t> sample_x(kSample);
+    std::vector<Y_t> sample_y(kSample);
+    std::vector<M_t> models;
+    std::vector<double> residuals;
+
+    double best_cost = std::numeric_limits<double>::infinity();
+    int best_support = 0;
+    int dynamic_max_trials = max_trials;
+    int trial = 0;
+    for (; trial < max_trials; ++trial) {
+      if (trial >= min_trials && trial >= dynamic_max_trials) break;
+      // Partial Fisher-Yates: pool[0..kSample) becomes a uniform random sample
+      // (valid from any current order of the pool).
+      for (int s = 0; s < kSample; ++s) {
+        const int j = s + static_cast<int>(internal::UniformIndex(rng, pool_size - s));
+        std::swap(pool[s], pool[j]);
+        sample_x[s] = X[pool[s]];
+        sample_y[s] = Y[pool[s]];
+      }
+      models.clear();
+      Estimator::Estimate(sample_x, sample_y, &models);
+      for (const M_t& model : models) {
+        Estimator::Residuals(X, Y, model, &residuals);
+        double cost = TruncatedCost(residuals, max_sq_error);
+        if (!(cost < best_cost)) continue;
+        report.model = model;
+        if (options_.local_optimization) {
+          // LO-RANSAC: polish every new so-far-best model (this only lowers its
+          // cost), so that hypotheses are ranked by their refitted cost, not by
+          // the luck of the minimal sample's noise.
+          cost = LocallyOptimize(X, Y, max_sq_error, &report.model, &residuals);
+        }
+        best_cost = cost;
+        best_support = CountInliers(residuals, max_sq_error);
+        int pool_inliers = 0;
+        for (int i : pool) pool_inliers += residuals[i] <= max_sq_error ? 1 : 0;
+        dynamic_max_trials =
+            internal::RansacNumTrials(static_cast<double>(pool_inliers) / pool_size, kSample,
+                                      options_.confidence, min_trials, max_trials);
+      }
+    }
+    report.num_trials = trial;
+    if (best_support < kSample) return report;
+
+    Estimator::Residuals(X, Y, report.model, &residuals);
+    report.inlier_mask.assign(num_points, 0);
+    report.support = 0;
+    for (int i = 0; i < num_points; ++i) {
+      if (residuals[i] <= max_sq_error) {
+        report.inlier_mask[i] = 1;
+        ++report.support;
+      }
+    }
+    report.success = report.support >= kSample;
+    if (!report.success) report.inlier_mask.clear();
+    return report;
+  }
+
+ private:
+  // Least-squares refits of `model`, kept while they lower the MSAC cost at
+  // max_error. The first refits take the inliers at kLoThresholdMultipliers x
+  // max_error (widest first): a model from a noisy minimal sample is often off
+  // by more than max_error at the far side of its structure, so its own inlier
+  // set is only part of it, and refitting on that part converges to the
+  // partial set. Then it iterates at max_error until the inliers are stable.
+  // `residuals` holds the model's squared residuals on entry and on exit.
+  // Returns the final MSAC cost.
+  static double LocallyOptimize(const std::vector<X_t>& X, const std::vector<Y_t>& Y,
+                                double max_sq_error, M_t* model, std::vector<double>* residuals) {
+    double cost = TruncatedCost(*residuals, max_sq_error);
+    std::vector<X_t> inlier_x;
+    std::vector<Y_t> inlier_y;
+    std::vector<M_t> models;
+    std::vector<double> refit_residuals;
+    // One refit on the points within `sq_threshold`; true if it was kept.
+    auto refit_once = [&](double sq_threshold, bool* same_inliers) {
+      inlier_x.clear();
+      inlier_y.clear();
+      for (size_t i = 0; i < X.size(); ++i) {
+        if ((*residuals)[i] <= sq_threshold) {
+          inlier_x.push_back(X[i]);
+          inlier_y.push_back(Y[i]);
+        }
+      }
+      models.clear();
+      Estimator::Estimate(inlier_x, inlier_y, &models);
+      for (const M_t& refit : models) {
+        Estimator::Residuals(X, Y, refit, &refit_residuals);
+        const double refit_cost = TruncatedCost(refit_residuals, max_sq_error);
+        if (!(refit_cost < cost)) continue;
+        *same_inliers = SameInliers(*residuals, refit_residuals, max_sq_error);
+        cost = refit_cost;
+        *model = refit;
+        residuals->swap(refit_residuals);
+        return true;
+      }
+      return false;
+    };
+    bool same_inliers = false;
+    for (double multiplier : kLoThresholdMultipliers) {
+      refit_once(multiplier * multiplier * max_sq_error, &same_inliers);
+    }
+    for (int iter = 0; iter < kMaxLocalOptimizationIterations; ++iter) {
+      if (!refit_once(max_sq_error, &same_inliers) || same_inliers) break;
+    }
+    return cost;
+  }
+
+  static int CountInliers(const std::vector<double>& sq_residuals, double max_sq_error) {
+    int count = 0;
+    for (double r : sq_residuals) count += r <= max_sq_error ? 1 : 0;
+    return count;
+  }
+
+  // MSAC cost: sum over all points of min(r^2, max_error^2).
+  static double TruncatedCost(const std::vector<double>& sq_residuals, double max_sq_error) {
+    double cost = 0.0;
+    for (double r : sq_residuals) cost += std::min(r, max_sq_error);
+    return cost;
+  }
+
+  static bool SameInliers(const std::vector<double>& a, const std::vector<double>& b,
+                          double max_sq_error) {
+    for (size_t i = 0; i < a.size(); ++i) {
+      if ((a[i] <= max_sq_error) != (b[i] <= max_sq_error)) return false;
+    }
+    return true;
+  }
+
+  RansacOptions options_;
+};
+
+}  // namespace slapse

@@ -1,0 +1,97 @@
+// Plane-at-infinity thresholding (ALGORITHM.md §3, paper Sec. V-B): drop the
+// correspondences whose motion is explained by the camera rotation alone.
+//
+// Conventions.
+//  - Pixels as in core/common/camera.h (pixel centres on integers).
+//  - later_from_earlier = (R, t): X_later = R * X_earlier + t for a 3D point in
+//    the two camera frames (Rigid3d's b_from_a). R "rotates C_k into C_{k+1}"
+//    in the paper's words; the paper's K R^{-1} K^{-1} with R = earlier_from_later
+//    rotation is the same map as K R K^{-1} here.
+//  - Rotation-only prediction of the later pixel of correspondence i:
+//      x'_later ~ K R K^{-1} [x_earlier; 1],
+//    parallax_px[i] = ||x'_later - x_later|| (the MB centre). +infinity when
+//    x'_later is behind the camera (third coordinate <= 0). A correspondence is
+//    on the plane at infinity (dropped) iff parallax_px < tau_inf_px.
+//
+// Motion estimation (has_motion = true):
+//   cv::findEssentialMat(x_earlier, x_later, K, cv::USAC_MAGSAC, confidence,
+//   ransac_threshold_px) and cv::recoverPose (cheirality), which give
+//   later_from_earlier with |t| = 1. Pixels go in directly with K; OpenCV turns
+//   the threshold into normalised units by the mean focal length. USAC_MAGSAC,
+//   not cv::RANSAC: the latter returns a minimal-sample E, whose R is off by
+//   ~0.1 deg on the synthetic street (0.25 px noise) -- 0.8 px of fake parallax
+//   at f = 457 px, which alone pushes far points over tau_inf = 1 px. MAGSAC's
+//   polished E gives ~0.01-0.02 deg. OpenCV's USAC seeds its RNG with a fixed
+//   state, so the result is deterministic.
+//
+// Degenerate epipolar geometry (has_motion = false, no error). With no or too
+// little translation, E is undetermined (every t fits a pure rotation), and the
+// R from recoverPose may be the wrong member of the twisted pair. So a
+// rotation-only model is fitted as well: our Ransac<> over 2-point Kabsch fits
+// on the bearing vectors, with the residual in pixels approximated as the mean
+// focal length times the normalised-image-plane error. Translation counts as
+// observed iff (a) cheirality holds for >= min_correspondences points, (b) at
+// least min_correspondences E-inliers deviate from that rotation-only model by
+// >= max(tau_inf_px, ransac_threshold_px) (parallax that E explains), and (c)
+// those are at least min_parallax_inlier_ratio of all points the rotation-only
+// model does not explain. (c) matters: under a pure rotation E is free to pick
+// the t that makes the most *wrong* MVs look epipolar-consistent; with half the
+// MVs wrong (+-32 px) that is 20-30 points with cheirality -- above any sensible
+// absolute count -- but < 10% of them, while genuine parallax points are almost
+// all E-inliers. Otherwise has_motion = false, later_from_earlier =
+// (R_rotation_only, 0) and the thresholding uses R_rotation_only -- or R = I
+// when even that fit fails or there are fewer than max(min_correspondences, 5)
+// correspondences (then nothing is estimated).
+//
+// Correspondences that are no E-inliers (wrong MVs) are thresholded like all
+// others, as in the paper: they usually have large parallax, are kept, and are
+// rejected later by the homography RANSAC. e_inlier_mask lets callers drop them.
+#pragma once
+
+#include <vector>
+
+#include "core/common/camera.h"
+#include "core/common/rigid3.h"
+#include "core/common/status.h"
+#include "core/merge/correspondence.h"
+
+namespace slapse {
+
+struct InfinityOptions {
+  double tau_inf_px = 1.0;           // parallax below this: plane at infinity
+  double ransac_threshold_px = 1.0;  // E and rotation-only RANSAC inlier threshold
+  double confidence = 0.999;         // RANSAC confidence for both fits
+  int min_correspondences = 15;      // fewer: no motion estimate (has_motion = false)
+  // Translation needs this share of the rotation-only outliers to be E-inliers.
+  double min_parallax_inlier_ratio = 0.25;
+};
+
+enum class InfinityRotationSource {
+  kEssential,     // R from E + cheirality (has_motion = true)
+  kRotationOnly,  // R from the rotation-only fit (pure rotation / no translation)
+  kIdentity,      // nothing could be estimated: R = I
+};
+
+struct InfinityResult {
+  bool has_motion = false;
+  InfinityRotationSource rotation_source = InfinityRotationSource::kIdentity;
+  // X_later = R X_earlier + t; |t| = 1 when has_motion, t = 0 otherwise.
+  Rigid3d later_from_earlier;
+  std::vector<char> e_inlier_mask;  // per correspondence; all 0 when E was not estimated
+  int num_e_inliers = 0;
+  int num_cheirality_inliers = 0;    // points recoverPose triangulated in front of both cameras
+  int num_rotation_outliers = 0;     // points off the rotation-only model by >= max(tau, threshold)
+  int num_parallax_inliers = 0;      // ... of which E-inliers
+  std::vector<double> parallax_px;   // per correspondence, w.r.t. later_from_earlier's R
+  std::vector<int> kept_indices;     // parallax_px >= tau_inf_px (ascending)
+  std::vector<int> dropped_indices;  // parallax_px < tau_inf_px: plane at infinity (ascending)
+};
+
+// InvalidArgument: intrinsics without positive finite focal lengths or a finite
+// principal point, non-finite correspondence coordinates, or non-positive
+// thresholds. Internal: OpenCV threw (not expected for finite input).
+StatusOr<InfinityResult> ThresholdInfinity(const std::vector<Correspondence>& correspondences,
+                                           const Intrinsics& intrinsics,
+                                           const InfinityOptions& options);
+
+}  // namespace slapse

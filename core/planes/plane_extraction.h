@@ -1,0 +1,104 @@
+// Multi-plane homography RANSAC with plane tracking (ALGORITHM.md §4, paper
+// Sec. V-C), in streaming form: one call per anchor pair, in display order.
+//
+// Homography convention: x_earlier ~ H_earlier_from_later * x_later (pixels,
+// homogeneous), as in the paper's x_k ~ H x^c_{k+1}. A correspondence is an
+// inlier of H iff ||x_earlier - dehom(H x_later)|| <= eps_h_px (transfer error
+// in the earlier anchor). H is estimated by HomographyEstimator (normalised
+// DLT; ||H||_F = 1, sign such that (H x_later)_z > 0 on its inliers).
+// For a plane n^T X = d in the *later* camera frame (n unit, d > 0) and
+// earlier_from_later = (R, t) (X_earlier = R X_later + t):
+//   X_earlier = (R + t n^T / d) X_later  =>  H ~ K (R + t n^T / d) K^{-1}.
+//
+// Per Process call:
+//  1. Tracking (only when pair.earlier_index equals the previous pair's
+//     later_index): each remembered plane owns a set of MB cells of that anchor,
+//     which is this pair's earlier anchor. Its sampling subset is the remaining
+//     correspondences whose x_earlier_px falls into one of those cells (16x16
+//     cells, cell (c, r) covers pixels [16c - 0.5, 16c + 15.5) x [16r - 0.5, ...)
+//     in the pixel-centres-on-integers convention). RANSAC samples only from the
+//     subset and scores on all remaining correspondences. The track continues
+//     (same track_id, tracked = true) iff the plane has >= min_mbs_per_plane MBs
+//     AND at least min_track_overlap of the subset are its inliers. Scoring on
+//     all points lets the plane grow, but also lets a few foreign points in the
+//     subset (a neighbour's border, or a new plane that took over the old MBs)
+//     propose a bigger plane that wins on total support; the overlap guard
+//     turns that hijack into a lost track.
+//     Planes are tried in ascending track_id; each removes its inliers.
+//  2. Discovery: sequential RANSAC on what remains; each plane with
+//     >= min_mbs_per_plane MBs gets a new track_id (never reused, also not after
+//     Reset) and removes its inliers. Stops at max_planes planes (tracked
+//     included), when fewer than 4 correspondences remain, or when the best
+//     model has fewer than min_mbs_per_plane MBs.
+//  3. The planes' MB sets (mb_index, later anchor) are remembered for the next pair.
+// Deterministic: RANSAC call j of a Process call is seeded from (seed, j).
+#pragma once
+
+#include <cstdint>
+#include <set>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/common/status.h"
+#include "core/merge/correspondence.h"
+
+namespace slapse {
+
+struct PlaneExtractionOptions {
+  double eps_h_px = 1.0;       // homography inlier threshold (transfer error)
+  int min_mbs_per_plane = 20;  // distinct MBs a plane needs
+  int max_planes = 8;          // per anchor pair, tracked + new
+  int max_trials_per_plane = 2000;
+  int min_trials_per_plane = 10;
+  double confidence = 0.999;
+  double min_track_overlap = 0.5;  // fraction of a track's sampling subset that must be inliers
+  uint64_t seed = 0;
+};
+
+struct ExtractedPlane {
+  int track_id = -1;
+  Eigen::Matrix3d H_earlier_from_later = Eigen::Matrix3d::Identity();  // x_earlier ~ H x_later
+  std::vector<int> correspondence_indices;  // into pair.correspondences, ascending
+  std::vector<int> mb_indices;              // distinct MB indices in the later anchor, ascending
+  bool tracked = false;                     // continued from the previous pair
+  // Tracked planes only: the sampling subset (correspondences on the track's
+  // old MBs) and how many of it are inliers of this plane.
+  int track_subset_size = 0;
+  int track_subset_inliers = 0;
+};
+
+struct PlaneExtractionResult {
+  std::vector<ExtractedPlane> planes;   // tracked planes first (ascending track_id), then new ones
+  std::vector<int> unassigned_indices;  // kept correspondences on no plane, ascending
+  int num_tracks_lost = 0;              // remembered planes that were not found again
+};
+
+class PlaneExtractor {
+ public:
+  explicit PlaneExtractor(PlaneExtractionOptions options);
+
+  // kept_indices: the correspondences left after ThresholdInfinity (duplicates
+  // ignored). InvalidArgument (state unchanged) when an index is out of range,
+  // the MB grid is empty, or a kept correspondence has an mb_index outside it
+  // or non-finite coordinates.
+  StatusOr<PlaneExtractionResult> Process(const AnchorPair& pair,
+                                          const std::vector<int>& kept_indices);
+
+  // Forgets the remembered planes (track ids keep increasing).
+  void Reset();
+
+ private:
+  struct Track {
+    int track_id;
+    std::set<int> mb_cells;  // MB indices in the anchor with display index last_later_index_
+  };
+
+  PlaneExtractionOptions options_;
+  std::vector<Track> tracks_;
+  int64_t last_later_index_ = -1;
+  bool has_previous_ = false;
+  int next_track_id_ = 0;
+};
+
+}  // namespace slapse

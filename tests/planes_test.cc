@@ -1,0 +1,666 @@
+// Plane-at-infinity thresholding and multi-plane extraction with tracking, on
+// a synthetic street: road and two facades seen by a camera that moves forward
+// 1 m per anchor pair with a small rotation; a 40x30 MB grid at 640x480,
+// fx = fy = 457; 0.25 px MV noise, 20% wrong MVs, and far points (1000 m) where
+// a ray hits no plane.
+#include <algorithm>
+#include <cmath>
+#include <functional>
+#include <map>
+#include <random>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <Eigen/Geometry>
+#include <Eigen/SVD>
+
+#include "core/common/camera.h"
+#include "core/common/rigid3.h"
+#include "core/merge/correspondence.h"
+#include "core/planes/infinity.h"
+#include "core/planes/plane_extraction.h"
+
+namespace slapse {
+namespace {
+
+constexpr int kCols = 40, kRows = 30;
+constexpr double kDegToRad = M_PI / 180.0;
+
+Intrinsics TestIntrinsics() {
+  Intrinsics k;
+  k.fx_px = k.fy_px = 457.0;
+  k.cx_px = 319.5;  // pixel centres on integers
+  k.cy_px = 239.5;
+  k.width_px = 640;
+  k.height_px = 480;
+  return k;
+}
+
+enum Label { kOutlier = -1, kFar = 0, kRoad = 1, kLeftFacade = 2, kRightFacade = 3 };
+
+// A bounded plane n^T X = d in the world frame (x right, y down, z forward),
+// visible where Z <= max_z and Y >= min_y.
+struct ScenePlane {
+  Label label;
+  Eigen::Vector3d n;
+  double d;
+  double max_z, min_y;
+};
+
+std::vector<ScenePlane> Street() {
+  return {
+      {kRoad, {0, 1, 0}, 1.5, 60.0, -1e9},         // road 1.5 m below the camera
+      {kLeftFacade, {-1, 0, 0}, 4.0, 40.0, -6.0},  // facade at x = -4, 7.5 m high
+      {kRightFacade, {1, 0, 0}, 5.0, 30.0, -6.0},  // facade at x = +5
+  };
+}
+
+// cam_from_world of a camera at `centre` with yaw (about y) and pitch (about x).
+Rigid3d CamFromWorld(const Eigen::Vector3d& centre, double yaw_deg, double pitch_deg) {
+  const Eigen::Matrix3d world_from_cam_r =
+      (Eigen::AngleAxisd(yaw_deg * kDegToRad, Eigen::Vector3d::UnitY()) *
+       Eigen::AngleAxisd(pitch_deg * kDegToRad, Eigen::Vector3d::UnitX()))
+          .toRotationMatrix();
+  return Rigid3d(world_from_cam_r, centre).Inverse();
+}
+
+struct SyntheticPair {
+  AnchorPair pair;
+  std::vector<int> label;                // per correspondence: Label, kOutlier for wrong MVs
+  std::vector<int> true_label;           // the surface hit, even for wrong MVs
+  std::vector<double> true_parallax_px;  // noise-free rotation-only parallax
+  Rigid3d later_from_earlier;
+};
+
+struct SceneNoise {
+  double sigma_px = 0.25;
+  double outlier_ratio = 0.2;
+  uint64_t seed = 0;
+};
+
+SyntheticPair MakePair(const Rigid3d& earlier_from_world, const Rigid3d& later_from_world,
+                       int64_t earlier_index, const SceneNoise& noise,
+                       const std::vector<ScenePlane>& planes = Street()) {
+  const Intrinsics intr = TestIntrinsics();
+  std::mt19937_64 rng(noise.seed);
+  std::normal_distribution<double> gauss(0.0, noise.sigma_px);
+  std::uniform_real_distribution<double> unit(0.0, 1.0), wrong_mv(-32.0, 32.0);
+
+  SyntheticPair s;
+  s.pair.earlier_index = earlier_index;
+  s.pair.later_index = earlier_index + 1;
+  s.pair.mb_cols = kCols;
+  s.pair.mb_rows = kRows;
+  s.later_from_earlier = later_from_world * earlier_from_world.Inverse();
+  const Rigid3d world_from_later = later_from_world.Inverse();
+  const Eigen::Matrix3d KRKinv = intr.K() * s.later_from_earlier.R() * intr.K().inverse();
+  for (int r = 0; r < kRows; ++r) {
+    for (int c = 0; c < kCols; ++c) {
+      const Eigen::Vector2d x_later(16.0 * c + 7.5, 16.0 * r + 7.5);
+      const Eigen::Vector3d origin = world_from_later.translation;
+      const Eigen::Vector3d dir = world_from_later.R() * intr.Unproject(x_later);
+      double best_s = 1e18;
+      Label label = kFar;
+      for (const ScenePlane& p : planes) {
+        const double denom = p.n.dot(dir);
+        if (std::abs(denom) < 1e-12) continue;
+        const double s_hit = (p.d - p.n.dot(origin)) / denom;
+        const Eigen::Vector3d X = origin + s_hit * dir;
+        if (s_hit <= 1e-6 || s_hit >= best_s || X.z() > p.max_z || X.y() < p.min_y) continue;
+        best_s = s_hit;
+        label = p.label;
+      }
+      const Eigen::Vector3d X_world = label == kFar
+                                          ? Eigen::Vector3d(origin + 1000.0 * dir.normalized())
+                                          : Eigen::Vector3d(origin + best_s * dir);
+      const Eigen::Vector3d X_earlier = earlier_from_world * X_world;
+      if (X_earlier.z() < 0.1) continue;
+      const Eigen::Vector2d x_earlier = intr.Project(X_earlier);
+      if (x_earlier.x() < -64 || x_earlier.x() > 704 || x_earlier.y() < -64 ||
+          x_earlier.y() > 544) {
+        continue;
+      }
+      Correspondence corr;
+      corr.x_later_px = x_later;
+      corr.mb_index = r * kCols + c;
+      corr.variance_px2 = noise.sigma_px * noise.sigma_px;
+      corr.n_direct = 1;
+      const bool wrong = unit(rng) < noise.outlier_ratio;
+      corr.x_earlier_px =
+          wrong ? Eigen::Vector2d(x_later + Eigen::Vector2d(wrong_mv(rng), wrong_mv(rng)))
+                : Eigen::Vector2d(x_earlier + Eigen::Vector2d(gauss(rng), gauss(rng)));
+      s.pair.correspondences.push_back(corr);
+      s.label.push_back(wrong ? kOutlier : label);
+      s.true_label.push_back(label);
+      s.true_parallax_px.push_back(
+          ((KRKinv * x_earlier.homogeneous()).hnormalized() - x_later).norm());
+    }
+  }
+  return s;
+}
+
+// The plane-induced homography x_earlier ~ H x_later (see plane_extraction.h):
+// plane n_w^T X = d_w in the world; in the later frame n_l = R_lw n_w,
+// d_l = d_w + n_l^T t_lw; with earlier_from_later (R, t): H = K (R + t n_l^T / d_l) K^{-1}.
+Eigen::Matrix3d TrueHomography(const ScenePlane& plane, const Rigid3d& earlier_from_world,
+                               const Rigid3d& later_from_world) {
+  const Eigen::Matrix3d K = TestIntrinsics().K();
+  const Eigen::Vector3d n_l = later_from_world.R() * plane.n;
+  const double d_l = plane.d + n_l.dot(later_from_world.translation);
+  const Rigid3d earlier_from_later = earlier_from_world * later_from_world.Inverse();
+  return K * (earlier_from_later.R() + earlier_from_later.translation * n_l.transpose() / d_l) *
+         K.inverse();
+}
+
+Eigen::Vector2d Transfer(const Eigen::Matrix3d& H, const Eigen::Vector2d& x) {
+  return (H * x.homogeneous()).hnormalized();
+}
+
+// K^-1 H K scaled so that its middle singular value is 1 and det > 0: for a
+// plane-induced H this is exactly R + t n^T / d.
+Eigen::Matrix3d CalibratedHomography(const Eigen::Matrix3d& H) {
+  const Eigen::Matrix3d K = TestIntrinsics().K();
+  Eigen::Matrix3d G = K.inverse() * H * K;
+  G /= Eigen::JacobiSVD<Eigen::Matrix3d>(G).singularValues()(1);
+  return G.determinant() < 0 ? Eigen::Matrix3d(-G) : G;
+}
+
+double RotationAngleDeg(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
+  return Eigen::AngleAxisd(a.transpose() * b).angle() / kDegToRad;
+}
+
+// The three camera poses of the tests: forward 1 m per pair, small turns.
+Rigid3d Frame0() { return CamFromWorld({0, 0, 0}, 0.0, 0.0); }
+Rigid3d Frame1() { return CamFromWorld({0.05, 0, 1.0}, 1.5, -0.5); }
+Rigid3d Frame2() { return CamFromWorld({0.12, -0.02, 2.0}, 3.0, -0.8); }
+
+TEST(PlaneInducedHomographyTest, ConventionMatchesProjection) {
+  SceneNoise clean;
+  clean.sigma_px = 0.0;
+  clean.outlier_ratio = 0.0;
+  const SyntheticPair s = MakePair(Frame0(), Frame1(), 0, clean);
+  const std::vector<ScenePlane> planes = Street();
+  int checked = 0;
+  for (size_t i = 0; i < s.label.size(); ++i) {
+    if (s.label[i] <= 0) continue;
+    const Eigen::Matrix3d H = TrueHomography(planes[s.label[i] - 1], Frame0(), Frame1());
+    const Correspondence& c = s.pair.correspondences[i];
+    EXPECT_LT((Transfer(H, c.x_later_px) - c.x_earlier_px).norm(), 1e-6);
+    ++checked;
+  }
+  EXPECT_GT(checked, 600);
+}
+
+TEST(ThresholdInfinityTest, PureRotationDropsNearlyAll) {
+  SceneNoise noise;
+  noise.seed = 1;
+  const Rigid3d rotated = CamFromWorld({0, 0, 0}, 2.0, 0.7);
+  const SyntheticPair s = MakePair(Frame0(), rotated, 0, noise);
+  const auto result = ThresholdInfinity(s.pair.correspondences, TestIntrinsics(), {});
+  ASSERT_TRUE(result.ok()) << result.status().ToString();
+  EXPECT_FALSE(result->has_motion);
+  EXPECT_EQ(result->rotation_source, InfinityRotationSource::kRotationOnly);
+  EXPECT_LT(RotationAngleDeg(result->later_from_earlier.R(), s.later_from_earlier.R()), 0.05);
+  EXPECT_EQ(result->later_from_earlier.translation, Eigen::Vector3d::Zero());
+  int good = 0, good_kept = 0;
+  std::vector<char> kept(s.label.size(), 0);
+  for (int i : result->kept_indices) kept[i] = 1;
+  for (size_t i = 0; i < s.label.size(); ++i) {
+    if (s.label[i] == kOutlier) continue;
+    ++good;
+    good_kept += kept[i];
+  }
+  EXPECT_GT(good, 800);
+  EXPECT_LE(good_kept, 0.01 * good);
+  EXPECT_EQ(result->kept_indices.size() + result->dropped_indices.size(), s.label.size());
+}
+
+// Under a pure rotation E is free to choose t to make wrong MVs look
+// epipolar-consistent; with half the MVs wrong that yields more than
+// min_correspondences "parallax inliers" with cheirality. The share test must
+// still say "no translation", while real translation passes it.
+TEST(ThresholdInfinityTest, WrongMvsDoNotFakeTranslation) {
+  for (uint64_t seed = 1; seed <= 5; ++seed) {
+    SceneNoise noise;
+    noise.seed = seed;
+    noise.outlier_ratio = 0.5;
+    const SyntheticPair rot = MakePair(Frame0(), CamFromWorld({0, 0, 0}, 2.0, 0.7), 0, noise);
+    auto result = ThresholdInfinity(rot.pair.correspondences, TestIntrinsics(), {});
+    ASSERT_TRUE(result.ok());
+    EXPECT_FALSE(result->has_motion) << "seed " << seed;
+    EXPECT_LT(result->num_parallax_inliers, 0.1 * result->num_rotation_outliers);
+    const SyntheticPair fwd = MakePair(Frame0(), Frame1(), 0, noise);
+    result = ThresholdInfinity(fwd.pair.correspondences, TestIntrinsics(), {});
+    ASSERT_TRUE(result.ok());
+    EXPECT_TRUE(result->has_motion) << "seed " << seed;
+  }
+}
+
+TEST(ThresholdInfinityTest, ForwardMotionKeepsNearAndDropsFar) {
+  SceneNoise noise;
+  noise.seed = 2;
+  const SyntheticPair s = MakePair(Frame0(), Frame1(), 0, noise);
+  const auto result = ThresholdInfinity(s.pair.correspondences, TestIntrinsics(), {});
+  ASSERT_TRUE(result.ok()) << result.status().ToString();
+  ASSERT_TRUE(result->has_motion);
+  EXPECT_EQ(result->rotation_source, InfinityRotationSource::kEssential);
+  EXPECT_LT(RotationAngleDeg(result->later_from_earlier.R(), s.later_from_earlier.R()), 0.1);
+  const Eigen::Vector3d t_true = s.later_from_earlier.translation.normalized();
+  EXPECT_NEAR(result->later_from_earlier.translation.norm(), 1.0, 1e-9);
+  EXPECT_GT(result->later_from_earlier.translation.dot(t_true), std::cos(2.0 * kDegToRad));
+
+  std::vector<char> kept(s.label.size(), 0);
+  for (int i : result->kept_indices) kept[i] = 1;
+  int far = 0, far_dropped = 0, near = 0, near_kept = 0, outliers = 0, outliers_e = 0;
+  std::map<int, int> kept_per_plane;
+  for (size_t i = 0; i < s.label.size(); ++i) {
+    if (s.label[i] == kOutlier) {
+      ++outliers;
+      outliers_e += result->e_inlier_mask[i];
+      continue;
+    }
+    if (s.label[i] == kFar) {
+      ++far;
+      far_dropped += !kept[i];
+    } else if (s.true_parallax_px[i] >= 2.0) {
+      ++near;
+      near_kept += kept[i];
+    }
+    if (s.label[i] > 0) kept_per_plane[s.label[i]] += kept[i];
+  }
+  EXPECT_GT(far, 100);
+  EXPECT_GE(far_dropped, 0.9 * far);
+  EXPECT_GT(near, 300);
+  EXPECT_GE(near_kept, 0.99 * near);
+  EXPECT_GT(kept_per_plane[kRoad], 100);
+  EXPECT_GT(kept_per_plane[kLeftFacade], 100);
+  EXPECT_GT(kept_per_plane[kRightFacade], 50);
+  EXPECT_LE(outliers_e, 0.15 * outliers);  // wrong MVs rarely satisfy the epipolar constraint
+}
+
+TEST(ThresholdInfinityTest, DegenerateInputIsNoMotionNotError) {
+  SceneNoise noise;
+  noise.seed = 3;
+  const SyntheticPair s = MakePair(Frame0(), Frame1(), 0, noise);
+  // Too few correspondences: nothing estimated, R = I.
+  const std::vector<Correspondence> few(s.pair.correspondences.begin(),
+                                        s.pair.correspondences.begin() + 10);
+  auto result = ThresholdInfinity(few, TestIntrinsics(), {});
+  ASSERT_TRUE(result.ok());
+  EXPECT_FALSE(result->has_motion);
+  EXPECT_EQ(result->rotation_source, InfinityRotationSource::kIdentity);
+  EXPECT_EQ(result->parallax_px.size(), 10u);
+
+  // A static camera (every MV zero): no motion, all on the plane at infinity.
+  std::vector<Correspondence> still = s.pair.correspondences;
+  for (auto& c : still) c.x_earlier_px = c.x_later_px;
+  result = ThresholdInfinity(still, TestIntrinsics(), {});
+  ASSERT_TRUE(result.ok());
+  EXPECT_FALSE(result->has_motion);
+  EXPECT_TRUE(result->kept_indices.empty());
+
+  // Empty input.
+  result = ThresholdInfinity({}, TestIntrinsics(), {});
+  ASSERT_TRUE(result.ok());
+  EXPECT_FALSE(result->has_motion);
+  EXPECT_TRUE(result->kept_indices.empty() && result->dropped_indices.empty());
+}
+
+TEST(ThresholdInfinityTest, BrokenContractIsInvalidArgument) {
+  SceneNoise noise;
+  const SyntheticPair s = MakePair(Frame0(), Frame1(), 0, noise);
+  auto result = ThresholdInfinity(s.pair.correspondences, Intrinsics{}, {});
+  EXPECT_EQ(result.status().code(), StatusCode::kInvalidArgument);
+  std::vector<Correspondence> bad = s.pair.correspondences;
+  bad[5].x_earlier_px.x() = std::nan("");
+  result = ThresholdInfinity(bad, TestIntrinsics(), {});
+  EXPECT_EQ(result.status().code(), StatusCode::kInvalidArgument);
+  InfinityOptions options;
+  options.tau_inf_px = 0.0;
+  result = ThresholdInfinity(s.pair.correspondences, TestIntrinsics(), options);
+  EXPECT_EQ(result.status().code(), StatusCode::kInvalidArgument);
+}
+
+// Runs thresholding and extraction on one pair.
+PlaneExtractionResult ExtractPlanes(PlaneExtractor* extractor, const SyntheticPair& s,
+                                    std::vector<int>* kept = nullptr) {
+  const auto inf = ThresholdInfinity(s.pair.correspondences, TestIntrinsics(), {});
+  EXPECT_TRUE(inf.ok());
+  if (kept != nullptr) *kept = inf->kept_indices;
+  auto planes = extractor->Process(s.pair, inf->kept_indices);
+  EXPECT_TRUE(planes.ok()) << planes.status().ToString();
+  return planes.ok() ? *planes : PlaneExtractionResult{};
+}
+
+// The label most of a plane's correspondences carry.
+int DominantLabel(const ExtractedPlane& plane, const SyntheticPair& s) {
+  std::map<int, int> votes;
+  for (int i : plane.correspondence_indices) ++votes[s.label[i]];
+  return std::max_element(votes.begin(), votes.end(),
+                          [](const auto& a, const auto& b) { return a.second < b.second; })
+      ->first;
+}
+
+// Checks that every true plane with enough kept MBs is recovered: >= 90% of its
+// kept, correct MBs in one extracted plane, >= 95% of that plane's MBs its own,
+// and the homography close to the true one on the plane's MBs.
+void ExpectPlanesRecovered(const PlaneExtractionResult& result, const SyntheticPair& s,
+                           const std::vector<int>& kept, const Rigid3d& earlier_from_world,
+                           const Rigid3d& later_from_world) {
+  std::map<int, std::vector<int>> kept_of;
+  for (int i : kept) {
+    if (s.label[i] > 0) kept_of[s.label[i]].push_back(i);
+  }
+  int expected_planes = 0;
+  for (const ScenePlane& plane : Street()) {
+    const std::vector<int>& truth = kept_of[plane.label];
+    if (truth.size() < 30) continue;
+    ++expected_planes;
+    const ExtractedPlane* best = nullptr;
+    int best_overlap = -1;
+    for (const ExtractedPlane& p : result.planes) {
+      int overlap = 0;
+      for (int i : p.correspondence_indices) overlap += s.label[i] == plane.label;
+      if (overlap > best_overlap) best_overlap = overlap, best = &p;
+    }
+    ASSERT_NE(best, nullptr) << "label " << plane.label;
+    EXPECT_GE(best_overlap, 0.9 * truth.size()) << "label " << plane.label;
+    EXPECT_GE(best_overlap, 0.95 * best->correspondence_indices.size()) << "label " << plane.label;
+    EXPECT_EQ(best->mb_indices.size(), best->correspondence_indices.size());
+
+    const Eigen::Matrix3d H_true = TrueHomography(plane, earlier_from_world, later_from_world);
+    double max_err = 0.0, sum_err = 0.0;
+    for (int i : truth) {
+      const Eigen::Vector2d& x = s.pair.correspondences[i].x_later_px;
+      const double err = (Transfer(best->H_earlier_from_later, x) - Transfer(H_true, x)).norm();
+      max_err = std::max(max_err, err);
+      sum_err += err;
+    }
+    EXPECT_LT(max_err, 0.5) << "label " << plane.label;
+    EXPECT_LT(sum_err / truth.size(), 0.15) << "label " << plane.label;
+    // Entry-wise in normalised camera coordinates: G = K^-1 H K scaled to the
+    // form R + t n^T / d (middle singular value 1) and to a positive determinant.
+    EXPECT_LT(
+        (CalibratedHomography(best->H_earlier_from_later) - CalibratedHomography(H_true)).norm(),
+        0.01)
+        << "label " << plane.label;
+  }
+  EXPECT_EQ(static_cast<int>(result.planes.size()), expected_planes);
+}
+
+TEST(PlaneExtractorTest, RecoversRoadAndFacades) {
+  SceneNoise noise;
+  noise.seed = 4;
+  const SyntheticPair s = MakePair(Frame0(), Frame1(), 0, noise);
+  PlaneExtractor extractor(PlaneExtractionOptions{});
+  std::vector<int> kept;
+  const PlaneExtractionResult result = ExtractPlanes(&extractor, s, &kept);
+  ExpectPlanesRecovered(result, s, kept, Frame0(), Frame1());
+  for (const ExtractedPlane& p : result.planes) EXPECT_FALSE(p.tracked);
+  // Track ids: 0, 1, 2, ... in discovery order.
+  for (size_t k = 0; k < result.planes.size(); ++k) EXPECT_EQ(result.planes[k].track_id, k);
+}
+
+TEST(PlaneExtractorTest, DeterministicGivenSeed) {
+  SceneNoise noise;
+  noise.seed = 5;
+  const SyntheticPair s = MakePair(Frame0(), Frame1(), 0, noise);
+  PlaneExtractor a(PlaneExtractionOptions{}), b(PlaneExtractionOptions{});
+  const PlaneExtractionResult ra = ExtractPlanes(&a, s), rb = ExtractPlanes(&b, s);
+  ASSERT_EQ(ra.planes.size(), rb.planes.size());
+  for (size_t k = 0; k < ra.planes.size(); ++k) {
+    EXPECT_EQ(ra.planes[k].correspondence_indices, rb.planes[k].correspondence_indices);
+    EXPECT_EQ(ra.planes[k].H_earlier_from_later, rb.planes[k].H_earlier_from_later);
+  }
+}
+
+TEST(PlaneExtractorTest, DegenerateInputGivesNoPlane) {
+  SceneNoise noise;
+  noise.seed = 6;
+  const SyntheticPair s = MakePair(Frame0(), Frame1(), 0, noise);
+  std::vector<int> all(s.label.size());
+  for (size_t i = 0; i < all.size(); ++i) all[i] = static_cast<int>(i);
+
+  // One MB row: the MB centres are collinear.
+  std::vector<int> row;
+  for (int i : all) {
+    if (s.pair.correspondences[i].mb_index / kCols == 25) row.push_back(i);
+  }
+  ASSERT_GE(row.size(), 30u);
+  PlaneExtractor extractor(PlaneExtractionOptions{});
+  auto result = extractor.Process(s.pair, row);
+  ASSERT_TRUE(result.ok());
+  EXPECT_TRUE(result->planes.empty());
+  EXPECT_EQ(result->unassigned_indices, row);
+
+  // Fewer than min_mbs_per_plane correspondences, all on the road (spread
+  // over it: every 12th road MB).
+  std::vector<int> road;
+  for (int i : all) {
+    if (s.label[i] == kRoad && s.true_parallax_px[i] > 3) road.push_back(i);
+  }
+  ASSERT_GE(road.size(), 240u);
+  std::vector<int> few_road;
+  for (size_t k = 0; k < 19; ++k) few_road.push_back(road[12 * k]);
+  result = extractor.Process(s.pair, few_road);
+  ASSERT_TRUE(result.ok());
+  EXPECT_TRUE(result->planes.empty());
+  // One more makes a plane.
+  few_road.push_back(road[12 * 19]);
+  extractor.Reset();
+  result = extractor.Process(s.pair, few_road);
+  ASSERT_TRUE(result.ok());
+  ASSERT_EQ(result->planes.size(), 1u);
+  EXPECT_EQ(result->planes[0].mb_indices.size(), 20u);
+
+  // Nothing kept.
+  result = extractor.Process(s.pair, {});
+  ASSERT_TRUE(result.ok());
+  EXPECT_TRUE(result->planes.empty());
+}
+
+TEST(PlaneExtractorTest, BrokenContractIsInvalidArgument) {
+  SceneNoise noise;
+  const SyntheticPair s = MakePair(Frame0(), Frame1(), 0, noise);
+  PlaneExtractor extractor(PlaneExtractionOptions{});
+  const int n = static_cast<int>(s.label.size());
+  EXPECT_EQ(extractor.Process(s.pair, {0, n}).status().code(), StatusCode::kInvalidArgument);
+  AnchorPair no_grid = s.pair;
+  no_grid.mb_cols = 0;
+  EXPECT_EQ(extractor.Process(no_grid, {0, 1}).status().code(), StatusCode::kInvalidArgument);
+  AnchorPair bad_mb = s.pair;
+  bad_mb.correspondences[1].mb_index = kCols * kRows;
+  EXPECT_EQ(extractor.Process(bad_mb, {0, 1}).status().code(), StatusCode::kInvalidArgument);
+}
+
+TEST(PlaneExtractorTest, MaxPlanesCapsTheCount) {
+  SceneNoise noise;
+  noise.seed = 7;
+  const SyntheticPair s = MakePair(Frame0(), Frame1(), 0, noise);
+  PlaneExtractionOptions options;
+  options.max_planes = 2;
+  PlaneExtractor extractor(options);
+  EXPECT_EQ(ExtractPlanes(&extractor, s).planes.size(), 2u);
+}
+
+TEST(PlaneExtractorTest, TracksPlanesAcrossConsecutivePairs) {
+  SceneNoise noise1, noise2;
+  noise1.seed = 8;
+  noise2.seed = 9;
+  const SyntheticPair s1 = MakePair(Frame0(), Frame1(), /*earlier_index=*/0, noise1);
+  const SyntheticPair s2 = MakePair(Frame1(), Frame2(), /*earlier_index=*/1, noise2);
+  PlaneExtractor extractor(PlaneExtractionOptions{});
+  const PlaneExtractionResult r1 = ExtractPlanes(&extractor, s1);
+  ASSERT_EQ(r1.planes.size(), 3u);
+  std::map<int, int> label_of_track;
+  for (const ExtractedPlane& p : r1.planes) label_of_track[p.track_id] = DominantLabel(p, s1);
+
+  std::vector<int> kept2;
+  const PlaneExtractionResult r2 = ExtractPlanes(&extractor, s2, &kept2);
+  ExpectPlanesRecovered(r2, s2, kept2, Frame1(), Frame2());
+  ASSERT_EQ(r2.planes.size(), 3u);
+  EXPECT_EQ(r2.num_tracks_lost, 0);
+  for (const ExtractedPlane& p : r2.planes) {
+    EXPECT_TRUE(p.tracked) << "track " << p.track_id;
+    ASSERT_TRUE(label_of_track.count(p.track_id)) << "track " << p.track_id;
+    EXPECT_EQ(DominantLabel(p, s2), label_of_track[p.track_id]) << "track " << p.track_id;
+    // The new correspondences on the track's old MBs are this plane's, up to
+    // wrong MVs (20%) and the plane's border.
+    EXPECT_GE(p.track_subset_inliers, 0.7 * p.track_subset_size) << "track " << p.track_id;
+    EXPECT_GE(p.track_subset_size, 0.8 * p.correspondence_indices.size()) << "track " << p.track_id;
+  }
+
+  // A pair that does not continue the last one (or a Reset) starts new tracks.
+  PlaneExtractor fresh(PlaneExtractionOptions{});
+  ExtractPlanes(&fresh, s1);
+  SyntheticPair gap = s2;
+  gap.pair.earlier_index = 5;
+  gap.pair.later_index = 6;
+  const PlaneExtractionResult r_gap = ExtractPlanes(&fresh, gap);
+  EXPECT_EQ(r_gap.num_tracks_lost, 3);
+  for (const ExtractedPlane& p : r_gap.planes) {
+    EXPECT_FALSE(p.tracked);
+    EXPECT_GE(p.track_id, 3);  // ids are never reused
+  }
+  fresh.Reset();
+  for (const ExtractedPlane& p : ExtractPlanes(&fresh, s2).planes) EXPECT_FALSE(p.tracked);
+}
+
+// A 2D toy for the tracking's MB bookkeeping under large image motion: the
+// frame-1 image is cut into 4 vertical bands, 10 MBs (160 px) wide, each moving
+// by its own vertical translation, so each band is one "plane" (the shifts are
+// chosen so that no single homography -- e.g. a shear through a staircase --
+// fits more than one band's worth of MBs). Pair 2 pans by 112 px (7 MBs): a
+// band's MBs in frame 1 are found only through x_earlier (frame-1 positions);
+// the frame-2 cells of the same indices hold mostly the neighbouring band.
+constexpr double kBandShiftPx[4] = {0.0, -30.0, -20.0, 20.0};
+
+int BandOf(const Eigen::Vector2d& p_frame1) {
+  const int band = static_cast<int>(std::floor((p_frame1.x() + 0.5) / 160.0));
+  return band >= 0 && band < 4 ? band : -1;
+}
+
+// band_of(frame-1 position): the band, -1 for no MB, kWrongMvBand for a wrong MV.
+constexpr int kWrongMvBand = 4;
+
+SyntheticPair MakeBandPair(int64_t earlier_index, const Eigen::Vector2d& pan_px,
+                           bool bands_in_later, uint64_t seed,
+                           const std::function<int(const Eigen::Vector2d&)>& band_of = BandOf) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> gauss(0.0, 0.25);
+  std::uniform_real_distribution<double> wrong_dy(-40.0, 40.0);
+  SyntheticPair s;
+  s.pair.earlier_index = earlier_index;
+  s.pair.later_index = earlier_index + 1;
+  s.pair.mb_cols = kCols;
+  s.pair.mb_rows = kRows;
+  for (int r = 0; r < kRows; ++r) {
+    for (int c = 0; c < kCols; ++c) {
+      Correspondence corr;
+      corr.x_later_px = {16.0 * c + 7.5, 16.0 * r + 7.5};
+      corr.mb_index = r * kCols + c;
+      // The band is where the point is in frame 1: the later anchor of pair 1,
+      // the earlier anchor of pair 2.
+      const Eigen::Vector2d moved = corr.x_later_px + pan_px;
+      const int band = band_of(bands_in_later ? corr.x_later_px : moved);
+      if (band < 0) continue;
+      if (band == kWrongMvBand) {  // same MB column, random row: fits no homography
+        corr.x_earlier_px = moved + Eigen::Vector2d(0.0, wrong_dy(rng));
+      } else {
+        corr.x_earlier_px = moved + Eigen::Vector2d(0.0, kBandShiftPx[band]) +
+                            Eigen::Vector2d(gauss(rng), gauss(rng));
+      }
+      s.pair.correspondences.push_back(corr);
+      s.label.push_back(band == kWrongMvBand ? kOutlier : band);
+    }
+  }
+  return s;
+}
+
+TEST(PlaneExtractorTest, TrackingFollowsMbsThroughLargeImageMotion) {
+  const SyntheticPair s1 = MakeBandPair(0, {-5.0, 0.0}, /*bands_in_later=*/true, 10);
+  const SyntheticPair s2 = MakeBandPair(1, {112.0, 0.0}, /*bands_in_later=*/false, 11);
+  std::vector<int> all1(s1.label.size()), all2(s2.label.size());
+  for (size_t i = 0; i < all1.size(); ++i) all1[i] = static_cast<int>(i);
+  for (size_t i = 0; i < all2.size(); ++i) all2[i] = static_cast<int>(i);
+
+  PlaneExtractor extractor(PlaneExtractionOptions{});
+  const auto r1 = extractor.Process(s1.pair, all1);
+  ASSERT_TRUE(r1.ok());
+  ASSERT_EQ(r1->planes.size(), 4u);
+  std::map<int, int> band_of_track;
+  for (const ExtractedPlane& p : r1->planes) {
+    EXPECT_GE(p.correspondence_indices.size(), 297u);  // 300 MBs; noise beyond 1 px is rare
+    EXPECT_LE(p.correspondence_indices.size(), 300u);
+    band_of_track[p.track_id] = DominantLabel(p, s1);
+  }
+
+  const auto r2 = extractor.Process(s2.pair, all2);
+  ASSERT_TRUE(r2.ok());
+  // All 4 bands are visible in frame 2, band 0 only 3 MB columns wide.
+  int tracked = 0;
+  for (const ExtractedPlane& p : r2->planes) {
+    if (!p.tracked) continue;
+    ++tracked;
+    EXPECT_EQ(DominantLabel(p, s2), band_of_track[p.track_id]) << "track " << p.track_id;
+    EXPECT_GE(p.track_subset_inliers, p.track_subset_size - 3) << "track " << p.track_id;
+  }
+  EXPECT_EQ(tracked, 4);
+  EXPECT_EQ(r2->planes.size(), 4u);
+}
+
+// Band 1's MBs are taken over by a new plane. Pair 1 has only wrong MVs where
+// band 2 will be, so it yields bands 0, 1, 3. In pair 2 the frame-1 columns
+// [160, 272) (most of band 1) carry only wrong MVs and [272, 480) move with
+// band 2. Sampling from band 1's old MBs can only find band 2's homography,
+// which explains 30% of them: band 1's track must be lost -- not continued on
+// band 2's MBs -- and band 2 must come out as a new plane.
+TEST(PlaneExtractorTest, TakenOverTrackIsLostNotHijacked) {
+  const auto band_of_1 = [](const Eigen::Vector2d& x) {
+    const int band = BandOf(x);
+    return band == 2 ? kWrongMvBand : band;
+  };
+  const SyntheticPair s1 = MakeBandPair(0, {-5.0, 0.0}, /*bands_in_later=*/true, 12, band_of_1);
+  const auto band_of_2 = [](const Eigen::Vector2d& x) {
+    const int band = BandOf(x);
+    if (band == 1) return x.x() + 0.5 < 272.0 ? kWrongMvBand : 2;
+    return band;
+  };
+  const SyntheticPair s2 = MakeBandPair(1, {-5.0, 0.0}, /*bands_in_later=*/false, 13, band_of_2);
+  std::vector<int> all1(s1.label.size()), all2(s2.label.size());
+  for (size_t i = 0; i < all1.size(); ++i) all1[i] = static_cast<int>(i);
+  for (size_t i = 0; i < all2.size(); ++i) all2[i] = static_cast<int>(i);
+
+  PlaneExtractor extractor(PlaneExtractionOptions{});
+  const auto r1 = extractor.Process(s1.pair, all1);
+  ASSERT_TRUE(r1.ok());
+  ASSERT_EQ(r1->planes.size(), 3u);
+  std::map<int, int> track_of_band;
+  for (const ExtractedPlane& p : r1->planes) track_of_band[DominantLabel(p, s1)] = p.track_id;
+  ASSERT_EQ(track_of_band.size(), 3u);
+  ASSERT_FALSE(track_of_band.count(2));
+
+  const auto r2 = extractor.Process(s2.pair, all2);
+  ASSERT_TRUE(r2.ok());
+  EXPECT_EQ(r2->num_tracks_lost, 1);
+  ASSERT_EQ(r2->planes.size(), 3u);
+  std::map<int, const ExtractedPlane*> plane_of_band;
+  for (const ExtractedPlane& p : r2->planes) {
+    EXPECT_NE(p.track_id, track_of_band[1]);
+    plane_of_band[DominantLabel(p, s2)] = &p;
+  }
+  for (int band : {0, 3}) {
+    ASSERT_TRUE(plane_of_band.count(band)) << "band " << band;
+    EXPECT_TRUE(plane_of_band[band]->tracked) << "band " << band;
+    EXPECT_EQ(plane_of_band[band]->track_id, track_of_band[band]) << "band " << band;
+  }
+  ASSERT_TRUE(plane_of_band.count(2));
+  EXPECT_FALSE(plane_of_band[2]->tracked);
+  EXPECT_EQ(plane_of_band[2]->track_id, 3);  // the next new id
+  int band_2_mbs = 0;                        // (a few wrong MVs fit band 2 by chance)
+  for (int i : plane_of_band[2]->correspondence_indices) band_2_mbs += s2.label[i] == 2;
+  EXPECT_GE(band_2_mbs, 387);  // 13 columns = 390 MBs; noise beyond 1 px is rare
+}
+
+}  // namespace
+}  // namespace slapse
