@@ -316,6 +316,47 @@ Status PlaneEkf::Update(const std::vector<PlaneObservation>& observations, Updat
       tracked.emplace_back(static_cast<size_t>(it - planes_.begin()), &o);
     }
   }
+  // Association gate at the prior: a plane whose macroblocks sit far outside
+  // the innovation covariance is a different surface under an old track id.
+  if (options_.association_gate > 0) {
+    const double extra2 = options_.extra_sigma_px * options_.extra_sigma_px;
+    for (size_t k = tracked.size(); k-- > 0;) {
+      const size_t index = tracked[k].first;
+      const PlaneObservation& obs = *tracked[k].second;
+      const int o = PlaneOffset(index);
+      Eigen::Matrix<double, 9, 9> P9;
+      P9.topLeftCorner<6, 6>() = P_.block<6, 6>(kTheta, kTheta);
+      P9.topRightCorner<6, 3>() = P_.block<6, 3>(kTheta, o);
+      P9.bottomLeftCorner<3, 6>() = P_.block<3, 6>(o, kTheta);
+      P9.bottomRightCorner<3, 3>() = P_.block<3, 3>(o, o);
+      std::vector<double> chi2;
+      for (size_t j = 0; j < obs.x_later_px.size(); ++j) {
+        Eigen::Vector2d z;
+        Eigen::Matrix<double, 2, 3> d_theta, d_t, d_pi;
+        if (!ObservePoint(K_, K_inv_, R_, t_, planes_[index].pi, obs.x_later_px[j], &z, &d_theta,
+                          &d_t, &d_pi)) {
+          chi2.push_back(1e9);
+          continue;
+        }
+        Eigen::Matrix<double, 2, 9> J;
+        J << d_theta, d_t, d_pi;
+        const Eigen::Matrix2d S =
+            J * P9 * J.transpose() + (obs.variance_px2[j] + extra2) * Eigen::Matrix2d::Identity();
+        const Eigen::Vector2d r = obs.x_earlier_px[j] - z;
+        chi2.push_back(r.dot(S.ldlt().solve(r)));
+      }
+      if (chi2.empty()) continue;
+      std::nth_element(chi2.begin(), chi2.begin() + chi2.size() / 2, chi2.end());
+      if (chi2[chi2.size() / 2] <= options_.association_gate) continue;
+      RemovePlane(index);
+      for (auto& [i, o2] : tracked) {
+        if (i > index) --i;
+      }
+      fresh.push_back(tracked[k].second);
+      tracked.erase(tracked.begin() + static_cast<std::ptrdiff_t>(k));
+      ++rep.planes_reassociated;
+    }
+  }
   rep.skipped = tracked.empty();
   if (!tracked.empty()) {
     const int n = static_cast<int>(P_.rows());

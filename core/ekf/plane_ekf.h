@@ -55,6 +55,13 @@ struct EkfOptions {
   // Huber threshold on normalised residuals (robust IRLS weights), 0 = off.
   double huber_k = 2.0;
   int iterations = 3;  // Gauss-Newton steps per update (1 = plain EKF)
+  // Data association gate: a tracked plane whose correspondences disagree
+  // with its prediction (median over its macroblocks of the squared
+  // Mahalanobis innovation, 2 dof, against the innovation covariance
+  // J P J^T + R) above this is taken for a different surface: the old plane is
+  // dropped and the observation starts a new one. 0 = off. (The median of a
+  // chi-square with 2 dof is 1.39.)
+  double association_gate = 6.0;
   // New planes: inflation of the covariance from their correspondences, and
   // the largest relative standard deviation of |pi| (given the motion) for a
   // plane to be added at all.
@@ -91,6 +98,7 @@ struct EkfState {
 
 struct UpdateReport {
   int planes_updated = 0, planes_added = 0, planes_removed = 0, planes_rejected = 0;
+  int planes_reassociated = 0;  // failed the association gate: replaced by a new plane
   int measurements = 0;
   double rms_residual_px = 0.0;  // after the update
   bool skipped = false;          // no tracked plane observed
