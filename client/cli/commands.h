@@ -8,6 +8,9 @@ namespace slapse::cli {
 
 int RunMvs(int argc, char** argv);
 int RunSimulate(int argc, char** argv);
+int RunPlanes(int argc, char** argv);
+int RunEvalPlanes(int argc, char** argv);
+int RunRun(int argc, char** argv);
 
 // Prints "slapse <command>: <message>" on stderr and returns 1 (or 2 for usage errors).
 int Fail(const char* command, const std::string& message, int code = 1);

@@ -27,14 +27,19 @@ struct Command {
 };
 
 const Command kCommands[] = {
+    {"run", slapse::cli::RunRun,
+     "the main job: trajectory + plane map from a video (TUM, KITTI, JSON, map.png)"},
     {"simulate", slapse::cli::RunSimulate,
      "render a street drive with ground truth and encode it (MPEG-2/MPEG-4/H.264)"},
     {"mvs", slapse::cli::RunMvs, "read a stream's motion vectors: dump, draw, summarise"},
+    {"planes", slapse::cli::RunPlanes, "extract planes and draw one anchor pair's (Fig. 5)"},
+    {"eval-planes", slapse::cli::RunEvalPlanes,
+     "plane extraction TP rate and recall on simulated drives (Table I)"},
 };
 
 void PrintUsage(FILE* out) {
   std::fprintf(out, "usage: slapse COMMAND [options]   ('slapse COMMAND --help' for details)\n\n");
-  for (const Command& c : kCommands) std::fprintf(out, "  %-10s %s\n", c.name, c.help);
+  for (const Command& c : kCommands) std::fprintf(out, "  %-12s %s\n", c.name, c.help);
 }
 
 }  // namespace

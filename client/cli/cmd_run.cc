@@ -1,0 +1,260 @@
+// slapse run: the offline main job. A compressed video in; the camera
+// trajectory (TUM, KITTI), the plane map (JSON) and a top-down plot out; with
+// --gt (a simulated drive's directory) the errors against the ground truth.
+#include <unistd.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "client/cli/commands.h"
+#include "client/cli/flags.h"
+#include "core/common/intrinsics_io.h"
+#include "core/eval/plane_map_eval.h"
+#include "core/eval/trajectory_eval.h"
+#include "core/mv/mv_reader.h"
+#include "core/pipeline/pipeline.h"
+#include "core/sim/ground_truth.h"
+#include "core/viz/plane_overlay.h"
+#include "core/viz/top_down_plot.h"
+
+namespace slapse::cli {
+namespace {
+
+Status WriteTrajectories(const std::vector<Pipeline::TrajectoryPoint>& traj,
+                         const std::string& dir) {
+  std::ofstream tum(dir + "/trajectory_tum.txt"), kitti(dir + "/trajectory_kitti.txt");
+  if (!tum || !kitti) return UnavailableError("cannot write trajectories into " + dir);
+  tum << "# timestamp_s tx ty tz qx qy qz qw  (world_from_cam; world = first tracked camera, "
+         "x right, y down, z forward)\n";
+  char line[400];
+  for (const auto& p : traj) {
+    const Eigen::Quaterniond& q = p.world_from_cam.rotation;
+    const Eigen::Vector3d& t = p.world_from_cam.translation;
+    std::snprintf(line, sizeof(line), "%.6f %.9f %.9f %.9f %.9f %.9f %.9f %.9f\n", p.timestamp_s,
+                  t.x(), t.y(), t.z(), q.x(), q.y(), q.z(), q.w());
+    tum << line;
+    const Eigen::Matrix3d R = p.world_from_cam.R();
+    std::snprintf(line, sizeof(line),
+                  "%.9f %.9f %.9f %.9f %.9f %.9f %.9f %.9f %.9f %.9f %.9f %.9f\n", R(0, 0), R(0, 1),
+                  R(0, 2), t.x(), R(1, 0), R(1, 1), R(1, 2), t.y(), R(2, 0), R(2, 1), R(2, 2),
+                  t.z());
+    kitti << line;
+  }
+  return Status::Ok();
+}
+
+Status WritePlanes(const std::map<int, MapPlane>& planes, bool metric, const std::string& path) {
+  std::ofstream out(path);
+  if (!out) return UnavailableError("cannot write " + path);
+  out << "{\n  \"frame\": \"world = first tracked camera (x right, y down, z forward); n . X = "
+         "d\",\n"
+      << "  \"unit\": \"" << (metric ? "m" : "first step") << "\",\n  \"planes\": [";
+  bool first = true;
+  char buf[256];
+  for (const auto& [id, p] : planes) {
+    out << (first ? "\n" : ",\n");
+    first = false;
+    std::snprintf(
+        buf, sizeof(buf),
+        "    {\"track_id\": %d, \"normal_world\": [%.6f, %.6f, %.6f], \"distance\": %.6f, "
+        "\"first_seen_s\": %.3f, \"last_seen_s\": %.3f, \"updates\": %d, ",
+        id, p.normal_world.x(), p.normal_world.y(), p.normal_world.z(), p.distance_m,
+        p.first_seen_s, p.last_seen_s, p.observations);
+    out << buf << "\"seen_at_frames\": [";
+    for (size_t i = 0; i < p.seen_indices.size(); ++i) out << (i ? ", " : "") << p.seen_indices[i];
+    out << "]}";
+  }
+  out << "\n  ]\n}\n";
+  return Status::Ok();
+}
+
+}  // namespace
+
+int RunRun(int argc, char** argv) {
+  Flags flags(
+      "run", "INPUT [options]   (INPUT: a file path or URL)",
+      {{"intrinsics", "SPEC",
+        "FILE.json, 'fx,fy,cx,cy' or 'hfov=DEG' (default: intrinsics.json beside INPUT)", ""},
+       {"out", "DIR", "output directory", "out/run"},
+       {"gt", "DIR", "a simulated drive's directory: print errors, draw the truth", ""},
+       {"first-step-m", "M", "metric scale: length of the first tracked step", ""},
+       {"speed-kmh", "V", "metric scale: speed at the start", ""},
+       {"camera-height-m", "H", "metric scale: camera height above the road plane", ""},
+       {"eps-h", "PX", "homography inlier threshold", "1"},
+       {"quiet", "", "no progress line", ""}});
+  if (Status s = flags.Parse(argc, argv); !s.ok()) return Fail("run", s.message(), 2);
+  if (flags.help_requested()) {
+    std::printf("%s", flags.Usage().c_str());
+    return 0;
+  }
+  if (flags.positional().size() != 1) return Fail("run", "expected one INPUT (see --help)", 2);
+  const std::string input = flags.positional()[0];
+  PipelineOptions po;
+  auto eps = flags.GetDouble("eps-h", 0.05, 100);
+  if (!eps.ok()) return Fail("run", eps.status().message(), 2);
+  po.extraction.eps_h_px = *eps;
+  int scale_sources = 0;
+  if (flags.Has("first-step-m")) {
+    auto v = flags.GetDouble("first-step-m", 1e-3, 1e3);
+    if (!v.ok()) return Fail("run", v.status().message(), 2);
+    po.scale.source = ScaleOptions::Source::kFirstStep;
+    po.scale.first_step_m = *v;
+    ++scale_sources;
+  }
+  if (flags.Has("speed-kmh")) {
+    auto v = flags.GetDouble("speed-kmh", 0.1, 500);
+    if (!v.ok()) return Fail("run", v.status().message(), 2);
+    po.scale.source = ScaleOptions::Source::kSpeed;
+    po.scale.speed_mps = *v / 3.6;
+    ++scale_sources;
+  }
+  if (flags.Has("camera-height-m")) {
+    auto v = flags.GetDouble("camera-height-m", 0.05, 100);
+    if (!v.ok()) return Fail("run", v.status().message(), 2);
+    po.scale.source = ScaleOptions::Source::kCameraHeight;
+    po.scale.camera_height_m = *v;
+    ++scale_sources;
+  }
+  if (scale_sources > 1) return Fail("run", "give at most one scale source", 2);
+
+  std::optional<GroundTruth> gt;
+  if (flags.Has("gt")) {
+    auto loaded = LoadGroundTruth(flags.GetString("gt"));
+    if (!loaded.ok()) return Fail("run", "--gt: " + loaded.status().ToString(), 2);
+    gt = std::move(*loaded);
+  }
+  auto reader = MvReader::Open(input);
+  if (!reader.ok()) return Fail("run", reader.status().ToString());
+  const StreamInfo& info = (*reader)->info();
+  std::string spec = flags.GetString("intrinsics");
+  if (spec.empty()) {
+    const auto beside = std::filesystem::path(input).parent_path() / "intrinsics.json";
+    if (!std::filesystem::exists(beside)) {
+      return Fail("run", "--intrinsics is required: no intrinsics.json beside " + input, 2);
+    }
+    spec = beside.string();
+  }
+  auto intrinsics = ParseIntrinsicsSpec(spec, info.width_px, info.height_px);
+  if (!intrinsics.ok()) return Fail("run", intrinsics.status().message(), 2);
+  const std::string out_dir = flags.GetString("out");
+  std::error_code ec;
+  std::filesystem::create_directories(out_dir, ec);
+  if (ec) return Fail("run", "cannot create " + out_dir + ": " + ec.message());
+
+  Pipeline pipeline(*intrinsics, info.mv_sigma_px(), po);
+  std::vector<PlaneEstimate> plane_estimates;
+  const bool progress = !flags.GetBool("quiet") && isatty(STDERR_FILENO);
+  int steps = 0, tracked = 0;
+  FrameRecord frame;
+  Status end;
+  while ((end = (*reader)->Next(&frame)).ok()) {
+    auto step = pipeline.Push(frame);
+    if (!step.ok()) return Fail("run", step.status().ToString());
+    if (progress && frame.index % 15 == 0) {
+      std::fprintf(stderr, "\rframe %lld  t %.1f s  anchor pairs %d (tracking %d)  planes %zu   ",
+                   static_cast<long long>(frame.index), frame.timestamp_s, steps, tracked,
+                   pipeline.plane_map().size());
+    }
+    if (!step->has_value()) continue;
+    const PipelineStep& s = **step;
+    ++steps;
+    tracked += s.tracking;
+    for (const PlaneTrack& track : s.planes) {
+      PlaneEstimate e{s.later_index, track.track_id, track.pi, {}};
+      for (const ExtractedPlane& ex : s.extracted) {
+        if (ex.track_id == track.track_id) e.mb_indices = ex.mb_indices;
+      }
+      if (!e.mb_indices.empty()) plane_estimates.push_back(std::move(e));
+    }
+  }
+  if (progress) std::fprintf(stderr, "\n");
+  const bool stream_ok = end.code() == StatusCode::kOutOfRange;
+  if (!stream_ok)
+    std::fprintf(stderr, "slapse run: %s (results up to there)\n", end.ToString().c_str());
+
+  if (Status s = WriteTrajectories(pipeline.trajectory(), out_dir); !s.ok()) {
+    return Fail("run", s.ToString());
+  }
+  if (Status s = WritePlanes(pipeline.plane_map(), pipeline.metric(), out_dir + "/planes.json");
+      !s.ok()) {
+    return Fail("run", s.ToString());
+  }
+  std::printf("input      %s (%s, %dx%d, %lld frames)\n", input.c_str(), info.codec_name.c_str(),
+              info.width_px, info.height_px, static_cast<long long>((*reader)->stats().frames));
+  std::printf("tracked    %d of %d anchor pairs, %zu poses, %zu planes in the map (%s)\n", tracked,
+              steps, pipeline.trajectory().size(), pipeline.plane_map().size(),
+              pipeline.metric() ? "metres" : "up to scale: first step = 1");
+
+  // Top-down plot: estimate in x-z of its world (first camera), or aligned to the truth.
+  TopDownPlot plot;
+  std::vector<Eigen::Vector2d> est_path;
+  const Sim3d* align = nullptr;
+  std::optional<TrajectoryErrors> terr;
+  if (gt.has_value()) {
+    std::vector<TimedPose> est, truth;
+    for (const auto& p : pipeline.trajectory())
+      est.push_back({p.index, p.timestamp_s, p.world_from_cam});
+    for (size_t i = 0; i < gt->frames.size(); ++i) {
+      truth.push_back(
+          {static_cast<int64_t>(i), gt->frames[i].timestamp_s, gt->frames[i].world_from_cam});
+    }
+    auto e = EvaluateTrajectory(est, truth);
+    if (e.ok()) {
+      terr = *e;
+      align = &terr->truth_from_estimate;
+      std::vector<Eigen::Vector2d> gt_path;
+      for (const TimedPose& t : truth) gt_path.push_back(t.world_from_cam.translation.head<2>());
+      plot.AddPath(gt_path, cv::Scalar(60, 60, 60), "ground truth", 2);
+      for (const GtPlane& p : gt->planes) {
+        if (p.kind != PlaneKind::kFacade) continue;
+        for (const auto& poly : p.polygons_world) {
+          for (size_t i = 0; i + 1 < poly.size(); ++i) {
+            if (std::abs(poly[i].z()) < 1e-6 && std::abs(poly[i + 1].z()) < 1e-6) {
+              plot.AddSegment(poly[i].head<2>(), poly[i + 1].head<2>(), cv::Scalar(190, 190, 190),
+                              3);
+            }
+          }
+        }
+      }
+    } else {
+      std::printf("errors     not available: %s\n", e.status().ToString().c_str());
+    }
+  }
+  auto to_map = [&](const Eigen::Vector3d& x) -> Eigen::Vector2d {
+    if (align != nullptr) return ((*align) * x).head<2>();
+    return Eigen::Vector2d(x.x(), x.z());  // camera world: x right, z forward
+  };
+  for (const auto& p : pipeline.trajectory())
+    est_path.push_back(to_map(p.world_from_cam.translation));
+  for (const auto& [id, mp] : pipeline.plane_map()) {
+    std::vector<Eigen::Vector2d> pts;
+    for (const Eigen::Vector3d& x : mp.support_world) pts.push_back(to_map(x));
+    plot.AddPoints(std::move(pts), TrackColour(id), 1);
+  }
+  plot.AddPath(est_path, cv::Scalar(30, 30, 220), align ? "SLAPSE (Sim(3)-aligned)" : "SLAPSE", 2);
+  const std::string unit = align != nullptr || pipeline.metric() ? "m" : "first steps";
+  cv::imwrite(out_dir + "/map.png", plot.Render(900, 900, "trajectory and plane map", unit));
+
+  if (terr.has_value()) {
+    auto perr = EvaluatePlaneMap(plane_estimates, *gt, terr->first_step_scale);
+    std::printf("distance   %.1f m over %d poses\n", terr->distance_m, terr->poses);
+    std::printf("eps_D      %.2f %%   (paper: mean relative position error, first-step scale)\n",
+                100 * terr->eps_D);
+    std::printf("ATE        %.3f m   (RMSE after Sim(3) alignment, scale %.3f m/unit)\n",
+                terr->ate_rmse_m, terr->sim3_scale);
+    std::printf("RPE        %.3f m, %.3f deg per anchor step (RMSE)\n", terr->rpe_trans_rmse_m,
+                terr->rpe_rot_rmse_deg);
+    if (perr.ok()) {
+      std::printf("planes     %d evaluated (seen >= 0.5 s): eps_d %.2f m, eps_n %.2f deg\n",
+                  perr->planes_evaluated, perr->eps_d_m, perr->eps_n_deg);
+    }
+  }
+  std::printf("wrote      %s/{trajectory_tum.txt, trajectory_kitti.txt, planes.json, map.png}\n",
+              out_dir.c_str());
+  return stream_ok ? 0 : 1;
+}
+
+}  // namespace slapse::cli

@@ -1,0 +1,198 @@
+#include "core/pipeline/pipeline.h"
+
+#include <chrono>
+#include <cmath>
+
+namespace slapse {
+namespace {
+
+double MsSince(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+constexpr size_t kMaxSupportPointsPerPlane = 4000;
+
+}  // namespace
+
+Pipeline::Pipeline(const Intrinsics& intrinsics, double sigma_px, PipelineOptions options)
+    : intrinsics_(intrinsics),
+      options_(options),
+      merger_(intrinsics.width_px, intrinsics.height_px, sigma_px, options.merge),
+      extractor_(options.extraction),
+      ekf_(intrinsics, options.ekf) {}
+
+StatusOr<std::optional<PipelineStep>> Pipeline::Push(const FrameRecord& frame) {
+  if (frame.index <= last_index_) {
+    return InvalidArgumentError("frame " + std::to_string(frame.index) + " after frame " +
+                                std::to_string(last_index_) +
+                                ": frames must come in display order");
+  }
+  last_index_ = frame.index;
+  const auto t0 = std::chrono::steady_clock::now();
+  std::optional<AnchorPair> pair = merger_.Push(frame);
+  if (!pair.has_value()) return std::optional<PipelineStep>();
+  const double merge_ms = MsSince(t0);
+  PipelineStep step = Process(*pair);
+  step.times.merge_ms = merge_ms;
+  return std::optional<PipelineStep>(std::move(step));
+}
+
+PipelineStep Pipeline::Process(const AnchorPair& pair) {
+  PipelineStep step;
+  step.earlier_index = pair.earlier_index;
+  step.later_index = pair.later_index;
+  step.timestamp_s = pair.later_timestamp_s;
+  step.segment = pair.type;
+  step.correspondences = static_cast<int>(pair.correspondences.size());
+  const double dt_s = pair.later_timestamp_s - pair.earlier_timestamp_s;
+
+  // Plane at infinity, then planes.
+  auto t0 = std::chrono::steady_clock::now();
+  StatusOr<InfinityResult> inf =
+      ThresholdInfinity(pair.correspondences, intrinsics_, options_.infinity);
+  step.times.threshold_ms = MsSince(t0);
+  std::vector<int> kept;
+  if (inf.ok()) kept = inf->kept_indices;
+  step.kept = static_cast<int>(kept.size());
+  t0 = std::chrono::steady_clock::now();
+  StatusOr<PlaneExtractionResult> extraction = extractor_.Process(pair, kept);
+  step.times.fit_ms = MsSince(t0);
+  if (extraction.ok()) step.extracted = extraction->planes;
+
+  std::vector<PlaneObservation> observations;
+  for (const ExtractedPlane& plane : step.extracted) {
+    PlaneObservation obs;
+    obs.track_id = plane.track_id;
+    for (int i : plane.correspondence_indices) {
+      const Correspondence& c = pair.correspondences[i];
+      obs.x_later_px.push_back(c.x_later_px);
+      obs.x_earlier_px.push_back(c.x_earlier_px);
+      obs.variance_px2.push_back(c.variance_px2);
+    }
+    observations.push_back(std::move(obs));
+  }
+
+  t0 = std::chrono::steady_clock::now();
+  if (!(dt_s > 0)) {
+    step.note = "anchor timestamps do not increase";
+  } else if (!ekf_.initialized()) {
+    const bool has_motion = inf.ok() && inf->has_motion;
+    if (!has_motion) {
+      step.note = "waiting to initialise: no reliable motion between the anchors";
+    } else if (static_cast<int>(step.extracted.size()) < options_.min_planes_to_initialise) {
+      step.note = "waiting to initialise: no plane extracted";
+    } else {
+      Rigid3d prev_from_cur = inf->later_from_earlier.Inverse();
+      const ScaleOptions& sc = options_.scale;
+      double length = 1.0;  // up to scale, or the last step's length on re-initialisation
+      if (!trajectory_.empty() && trajectory_.size() >= 2) {
+        const auto& a = trajectory_[trajectory_.size() - 2].world_from_cam.translation;
+        const auto& b = trajectory_.back().world_from_cam.translation;
+        length = std::max((b - a).norm(), 1e-6);
+      } else if (sc.source == ScaleOptions::Source::kFirstStep) {
+        length = sc.first_step_m;
+        metric_ = true;
+      } else if (sc.source == ScaleOptions::Source::kSpeed) {
+        length = sc.speed_mps * dt_s;
+        metric_ = true;
+      }
+      prev_from_cur.translation = prev_from_cur.translation.normalized() * length;
+      Status s = ekf_.Initialize(prev_from_cur, dt_s);
+      if (s.ok()) s = ekf_.Update(observations, &step.ekf);
+      if (!s.ok()) {
+        step.note = "initialisation failed: " + s.ToString();
+        ekf_ = PlaneEkf(intrinsics_, options_.ekf);
+      } else {
+        if (trajectory_.empty() || trajectory_.back().index != pair.earlier_index) {
+          if (trajectory_.empty()) world_from_cam_ = Rigid3d();
+          trajectory_.push_back({pair.earlier_index, pair.earlier_timestamp_s, world_from_cam_});
+        }
+        world_from_cam_ = world_from_cam_ * ekf_.prev_from_cur();
+        step.tracking = true;
+      }
+    }
+  } else {
+    Status s = ekf_.Predict(dt_s);
+    if (s.ok()) s = ekf_.Update(observations, &step.ekf);
+    if (!s.ok()) {
+      // Numerical failure: restart the filter on a later pair; the trajectory
+      // continues from the last pose with the last step's length as scale.
+      step.note = "filter reset: " + s.ToString();
+      ekf_ = PlaneEkf(intrinsics_, options_.ekf);
+    } else {
+      world_from_cam_ = world_from_cam_ * ekf_.prev_from_cur();
+      step.tracking = true;
+    }
+  }
+  step.times.ekf_ms = MsSince(t0);
+  if (step.tracking) {
+    trajectory_.push_back({pair.later_index, pair.later_timestamp_s, world_from_cam_});
+    RecordPlanes(step, pair);
+    if (options_.scale.source == ScaleOptions::Source::kCameraHeight && !metric_) {
+      MaybeFixScaleFromRoad();
+    }
+    step.world_from_cam = world_from_cam_;
+    step.planes = ekf_.planes();
+  }
+  step.metric = metric_;
+  return step;
+}
+
+void Pipeline::RecordPlanes(const PipelineStep& step, const AnchorPair& pair) {
+  const Eigen::Matrix3d R_wc = world_from_cam_.R();
+  for (const PlaneTrack& track : ekf_.planes()) {
+    MapPlane& mp = plane_map_[track.track_id];
+    if (mp.track_id < 0) {
+      mp.track_id = track.track_id;
+      mp.first_seen_index = step.later_index;
+      mp.first_seen_s = step.timestamp_s;
+    }
+    const Eigen::Vector3d n_c = track.pi.normalized();
+    const double d_c = 1.0 / track.pi.norm();
+    // n_c . X_c = d_c with X_c = R_wc^T (X_w - t_wc):  n_w = R_wc n_c, d_w = d_c + n_w . t_wc.
+    mp.normal_world = R_wc * n_c;
+    mp.distance_m = d_c + mp.normal_world.dot(world_from_cam_.translation);
+    mp.pi_cam = track.pi;
+    mp.last_seen_index = step.later_index;
+    mp.last_seen_s = step.timestamp_s;
+    mp.observations = track.observations;
+    mp.seen_indices.push_back(step.later_index);
+    for (const ExtractedPlane& ex : step.extracted) {
+      if (ex.track_id != track.track_id) continue;
+      mp.mb_indices = ex.mb_indices;
+      for (int i : ex.correspondence_indices) {
+        if (mp.support_world.size() >= kMaxSupportPointsPerPlane) break;
+        const Eigen::Vector3d ray = intrinsics_.Unproject(pair.correspondences[i].x_later_px);
+        const double inv_depth = track.pi.dot(ray);
+        if (inv_depth <= 0) continue;
+        mp.support_world.push_back(world_from_cam_ * (ray / inv_depth));
+      }
+    }
+  }
+}
+
+void Pipeline::MaybeFixScaleFromRoad() {
+  const ScaleOptions& sc = options_.scale;
+  for (const PlaneTrack& track : ekf_.planes()) {
+    if (track.observations < sc.road_min_observations) continue;
+    // Road: normal close to the camera's y axis (down), i.e. pi ~ (0, 1/h, 0).
+    const Eigen::Vector3d n = track.pi.normalized();
+    if (n.y() < std::cos(25.0 * M_PI / 180.0)) continue;
+    ApplyScale(sc.camera_height_m * track.pi.norm());
+    metric_ = true;
+    return;
+  }
+}
+
+void Pipeline::ApplyScale(double s) {
+  ekf_.Rescale(s);
+  for (TrajectoryPoint& p : trajectory_) p.world_from_cam.translation *= s;
+  world_from_cam_.translation *= s;
+  for (auto& [id, mp] : plane_map_) {
+    mp.distance_m *= s;
+    mp.pi_cam /= s;
+    for (Eigen::Vector3d& x : mp.support_world) x *= s;
+  }
+}
+
+}  // namespace slapse

@@ -1,0 +1,129 @@
+// The SLAPSE pipeline in streaming form: frame records in (display order),
+// one step per anchor pair out. Stages (ALGORITHM.md §2-5):
+//   SegmentMerger -> ThresholdInfinity -> PlaneExtractor -> PlaneEkf.
+// No stage buffers more than one GOP segment, so the service can run it live.
+//
+// Frames: the world frame is the camera frame of the first anchor the filter
+// was initialised on (x right, y down, z forward); poses are world_from_cam
+// (x_world = R x_cam + t). Lengths are in units of the first step unless a
+// scale source makes them metres.
+#pragma once
+
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/common/camera.h"
+#include "core/common/rigid3.h"
+#include "core/common/status.h"
+#include "core/ekf/plane_ekf.h"
+#include "core/merge/mv_merge.h"
+#include "core/mv/frame_record.h"
+#include "core/planes/infinity.h"
+#include "core/planes/plane_extraction.h"
+
+namespace slapse {
+
+// Where the metric scale comes from (monocular: otherwise up to scale).
+struct ScaleOptions {
+  enum class Source { kUpToScale, kFirstStep, kSpeed, kCameraHeight };
+  // kUpToScale: the first tracked step has length 1 (as the paper).
+  Source source = Source::kUpToScale;
+  // kFirstStep: length of the first tracked step, m.
+  double first_step_m = 1.0;
+  // kSpeed: the vehicle's speed at initialisation, m/s.
+  double speed_mps = 0.0;
+  // kCameraHeight: the camera's height above the road plane, m. The scale is
+  // fixed when a road plane (normal within 25 deg of the camera's down axis)
+  // has been tracked for `road_min_observations` updates.
+  double camera_height_m = 0.0;
+  int road_min_observations = 5;
+};
+
+struct PipelineOptions {
+  MergeOptions merge;
+  InfinityOptions infinity;
+  PlaneExtractionOptions extraction;
+  EkfOptions ekf;
+  ScaleOptions scale;
+  // Initialise only on a pair with motion and at least this many planes.
+  int min_planes_to_initialise = 1;
+};
+
+// A plane as the map holds it: world frame, with its history.
+struct MapPlane {
+  int track_id = -1;
+  Eigen::Vector3d normal_world = Eigen::Vector3d::UnitZ();  // unit, n . X = d
+  double distance_m = 0.0;  // in the trajectory's length unit (metres if metric)
+  Eigen::Vector3d pi_cam = Eigen::Vector3d::Zero();     // n / d in the camera of last_seen
+  int64_t first_seen_index = -1, last_seen_index = -1;  // anchor display indices
+  double first_seen_s = 0.0, last_seen_s = 0.0;
+  int observations = 0;
+  std::vector<int64_t> seen_indices;  // anchors where the filter held it
+  std::vector<int> mb_indices;        // cells of the last anchor it was seen in
+  // Extent in the world: the plane points of its macroblocks, accumulated.
+  std::vector<Eigen::Vector3d> support_world;
+};
+
+// Wall-clock cost of each stage for one anchor pair, milliseconds.
+struct StageTimes {
+  double merge_ms = 0, threshold_ms = 0, fit_ms = 0, ekf_ms = 0;
+};
+
+struct PipelineStep {
+  int64_t earlier_index = -1, later_index = -1;  // the anchor pair
+  double timestamp_s = 0.0;                      // of the later anchor
+  SegmentType segment = SegmentType::kPP;
+  bool tracking = false;                  // the filter is running (pose and planes valid)
+  bool metric = false;                    // lengths are metres
+  Rigid3d world_from_cam;                 // pose of the later anchor
+  int correspondences = 0, kept = 0;      // merged MBs, and those with parallax
+  std::vector<ExtractedPlane> extracted;  // this pair's planes (MB sets, homographies)
+  // The filter's planes after this step (n / d in the later anchor's camera).
+  std::vector<PlaneTrack> planes;
+  UpdateReport ekf;
+  StageTimes times;
+  std::string note;  // why the step did not track, if it did not
+};
+
+class Pipeline {
+ public:
+  // sigma_px: the stream's MV error (StreamInfo::mv_sigma_px()).
+  Pipeline(const Intrinsics& intrinsics, double sigma_px, PipelineOptions options = {});
+
+  // Feeds the next frame. Returns a step when the frame closed an anchor pair.
+  // Errors are for broken contracts only (e.g. frames out of order); a pair
+  // that cannot be used yields a step with tracking = false and a note.
+  StatusOr<std::optional<PipelineStep>> Push(const FrameRecord& frame);
+
+  struct TrajectoryPoint {
+    int64_t index;
+    double timestamp_s;
+    Rigid3d world_from_cam;
+  };
+  const std::vector<TrajectoryPoint>& trajectory() const { return trajectory_; }
+  // Every plane the filter ever held, by track id.
+  const std::map<int, MapPlane>& plane_map() const { return plane_map_; }
+  bool metric() const { return metric_; }
+
+ private:
+  PipelineStep Process(const AnchorPair& pair);
+  void RecordPlanes(const PipelineStep& step, const AnchorPair& pair);
+  void ApplyScale(double s);
+  void MaybeFixScaleFromRoad();
+
+  Intrinsics intrinsics_;
+  PipelineOptions options_;
+  SegmentMerger merger_;
+  PlaneExtractor extractor_;
+  PlaneEkf ekf_;
+  int64_t last_index_ = -1;
+  double last_anchor_s_ = 0.0;
+  Rigid3d world_from_cam_;
+  bool metric_ = false;
+  std::vector<TrajectoryPoint> trajectory_;
+  std::map<int, MapPlane> plane_map_;
+};
+
+}  // namespace slapse

@@ -1,0 +1,21 @@
+// Extracted planes for people: each plane's macroblocks as dots of one colour
+// over the later anchor's picture, like Fig. 5 of the SLAPSE paper.
+#pragma once
+
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "core/merge/correspondence.h"
+#include "core/planes/plane_extraction.h"
+
+namespace slapse {
+
+// `luma`: the later anchor's luma plane (may be empty: grey background).
+cv::Mat DrawPlanes(const std::vector<uint8_t>& luma, int width_px, int height_px,
+                   const AnchorPair& pair, const std::vector<ExtractedPlane>& planes);
+
+// A distinct colour per track id (BGR).
+cv::Scalar TrackColour(int track_id);
+
+}  // namespace slapse
