@@ -6,11 +6,9 @@
 // Prints a Markdown table: frames/s of bare FFmpeg decoding (no MV export),
 // of the MV reader (decode + export_mvs + conversion), and of the whole SLAPSE
 // pipeline (reader + merging + thresholding + plane fitting + EKF), each run in
-// its own forked process so that its peak memory is its own; then the
+// a fresh process of its own so that its peak memory is its own; then the
 // pipeline's per-anchor-pair stage times. Timing lives here, never in tests.
 #include <sys/resource.h>
-#include <sys/wait.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
@@ -109,36 +107,46 @@ long RunPipeline(const std::string& path, const slapse::Intrinsics& intrinsics, 
   return frames;
 }
 
-// Runs `mode` `repeat` times in a child process; reports the best time.
+// Runs `mode` `repeat` times and returns the best time; peak RSS is this process's.
+Result MeasureHere(int mode, const std::string& path, const slapse::Intrinsics& intrinsics,
+                   int repeat) {
+  Result best;
+  best.seconds = 1e30;
+  for (int i = 0; i < repeat; ++i) {
+    Result r;
+    const auto t0 = Clock::now();
+    r.frames = mode == 0   ? BareDecode(path)
+               : mode == 1 ? ReadMvs(path)
+                           : RunPipeline(path, intrinsics, &r);
+    r.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+    if (r.seconds < best.seconds) best = r;
+  }
+  rusage ru{};
+  getrusage(RUSAGE_SELF, &ru);
+  best.peak_rss_kb = ru.ru_maxrss;
+  return best;
+}
+
+// Runs one measurement in a fresh process (this binary with --measure), so
+// that its peak memory is its own and not the simulator's.
 Result Measure(int mode, const std::string& path, const slapse::Intrinsics& intrinsics,
                int repeat) {
-  int fds[2];
-  if (pipe(fds) != 0) return {};
-  const pid_t pid = fork();
-  if (pid == 0) {
-    close(fds[0]);
-    Result best;
-    best.seconds = 1e30;
-    for (int i = 0; i < repeat; ++i) {
-      Result r;
-      const auto t0 = Clock::now();
-      r.frames = mode == 0   ? BareDecode(path)
-                 : mode == 1 ? ReadMvs(path)
-                             : RunPipeline(path, intrinsics, &r);
-      r.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
-      if (r.seconds < best.seconds) best = r;
-    }
-    rusage ru{};
-    getrusage(RUSAGE_SELF, &ru);
-    best.peak_rss_kb = ru.ru_maxrss;
-    if (write(fds[1], &best, sizeof(best)) != sizeof(best)) _exit(1);
-    _exit(0);
-  }
-  close(fds[1]);
+  // popen runs a shell: name this binary by its real path.
+  const std::string self = std::filesystem::read_symlink("/proc/self/exe").string();
+  char cmd[2048];
+  std::snprintf(cmd, sizeof(cmd),
+                "'%s' --measure %d --repeat %d --input '%s' --fx %.9g "
+                "--fy %.9g --cx %.9g --cy %.9g",
+                self.c_str(), mode, repeat, path.c_str(), intrinsics.fx_px, intrinsics.fy_px,
+                intrinsics.cx_px, intrinsics.cy_px);
   Result r;
-  if (read(fds[0], &r, sizeof(r)) != sizeof(r)) r.frames = -1;
-  close(fds[0]);
-  waitpid(pid, nullptr, 0);
+  FILE* p = popen(cmd, "r");
+  if (p == nullptr) return r;
+  if (std::fscanf(p, "%lf %ld %ld %lf %lf %lf %lf %ld", &r.seconds, &r.frames, &r.peak_rss_kb,
+                  &r.merge_ms, &r.threshold_ms, &r.fit_ms, &r.ekf_ms, &r.pairs) != 8) {
+    r.frames = -1;
+  }
+  pclose(p);
   return r;
 }
 
@@ -147,17 +155,39 @@ Result Measure(int mode, const std::string& path, const slapse::Intrinsics& intr
 int main(int argc, char** argv) {
   av_log_set_level(AV_LOG_ERROR);
   std::string input, gt_dir;
-  int repeat = 3;
+  int repeat = 3, measure = -1;
+  slapse::Intrinsics given;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--input") && i + 1 < argc) {
       input = argv[++i];
     } else if (!std::strcmp(argv[i], "--repeat") && i + 1 < argc) {
       repeat = std::max(1, std::atoi(argv[++i]));
+    } else if (!std::strcmp(argv[i], "--measure") && i + 1 < argc) {  // internal
+      measure = std::atoi(argv[++i]);
+    } else if (!std::strcmp(argv[i], "--fx") && i + 1 < argc) {
+      given.fx_px = std::atof(argv[++i]);
+    } else if (!std::strcmp(argv[i], "--fy") && i + 1 < argc) {
+      given.fy_px = std::atof(argv[++i]);
+    } else if (!std::strcmp(argv[i], "--cx") && i + 1 < argc) {
+      given.cx_px = std::atof(argv[++i]);
+    } else if (!std::strcmp(argv[i], "--cy") && i + 1 < argc) {
+      given.cy_px = std::atof(argv[++i]);
     } else {
       std::fprintf(stderr,
                    "usage: slapse_bench [--input FILE (a simulated drive's video)] [--repeat N]\n");
       return 2;
     }
+  }
+  if (measure >= 0) {
+    auto reader = slapse::MvReader::Open(input);
+    if (!reader.ok()) return 1;
+    given.width_px = (*reader)->info().width_px;
+    given.height_px = (*reader)->info().height_px;
+    reader->reset();
+    const Result r = MeasureHere(measure, input, given, repeat);
+    std::printf("%.6f %ld %ld %.3f %.3f %.3f %.3f %ld\n", r.seconds, r.frames, r.peak_rss_kb,
+                r.merge_ms, r.threshold_ms, r.fit_ms, r.ekf_ms, r.pairs);
+    return 0;
   }
   slapse::Intrinsics intrinsics;
   if (input.empty()) {
