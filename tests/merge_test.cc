@@ -7,6 +7,9 @@
 
 #include <gtest/gtest.h>
 
+#include "core/mv/mv_reader.h"
+#include "tests/test_streams.h"
+
 namespace slapse {
 namespace {
 
@@ -290,6 +293,139 @@ TEST(SegmentMergerTest, IgnoresBFramesOfAnotherSegmentAndCorruptFrames) {
   auto pair = merger.Push(p);
   ASSERT_TRUE(pair);
   for (const Correspondence& c : pair->correspondences) EXPECT_EQ(c.n_indirect, 0);
+}
+
+}  // namespace
+}  // namespace slapse
+
+namespace slapse {
+namespace {
+
+// P frame of an IPPP stream whose content moves by x_prev = S x + b per frame
+// (a zoom with a drift): each cell's vector is (S - I) x + b at its centre.
+FrameRecord ZoomFrame(int64_t index, int cols, int rows, double s, const Eigen::Vector2d& b) {
+  FrameRecord f;
+  f.index = index;
+  f.timestamp_s = index / 30.0;
+  f.type = index == 0 ? PictureType::kI : PictureType::kP;
+  f.prev_anchor_index = index - 1;
+  if (index == 0) return f;
+  for (int r = 0; r < rows; ++r) {
+    for (int c = 0; c < cols; ++c) {
+      const Eigen::Vector2d x(16 * c + 7.5, 16 * r + 7.5);
+      const Eigen::Vector2d d = (s - 1.0) * (x - Eigen::Vector2d(80, 60)) + b;
+      MotionVector mv;
+      mv.x_px = static_cast<float>(x.x());
+      mv.y_px = static_cast<float>(x.y());
+      mv.dx_px = static_cast<float>(d.x());
+      mv.dy_px = static_cast<float>(d.y());
+      f.mvs.push_back(mv);
+    }
+  }
+  return f;
+}
+
+TEST(SegmentMergerTest, ChainsIpppVectorFieldsExactlyForAffineMotion) {
+  const int cols = 10, rows = 8;  // 160 x 128
+  const double s = 0.99;          // content grows 1 % a frame (driving forward)
+  const Eigen::Vector2d b(0.7, -0.3), c(80, 60);
+  SegmentMerger merger(160, 128, kSigma);
+  std::vector<AnchorPair> pairs;
+  for (int i = 0; i <= 8; ++i) {
+    if (auto p = merger.Push(ZoomFrame(i, cols, rows, s, b))) pairs.push_back(*p);
+  }
+  // Gaps of 4 frames: (0 -> 4) and (4 -> 8).
+  ASSERT_EQ(pairs.size(), 2u);
+  EXPECT_EQ(pairs[0].earlier_index, 0);
+  EXPECT_EQ(pairs[0].later_index, 4);
+  EXPECT_EQ(pairs[0].type, SegmentType::kIP);
+  EXPECT_EQ(pairs[1].earlier_index, 4);
+  EXPECT_EQ(pairs[1].type, SegmentType::kPP);
+  for (const AnchorPair& pair : pairs) {
+    EXPECT_GT(pair.correspondences.size(), 40u);
+    for (const Correspondence& corr : pair.correspondences) {
+      // Four steps of x -> s (x - c) + c + b.
+      Eigen::Vector2d x = corr.x_later_px;
+      for (int k = 0; k < 4; ++k) x = s * (x - c) + c + b;
+      // Bilinear interpolation reproduces an affine field exactly inside the
+      // grid; at the border the nearest cell stands in (off by the field's
+      // change over half a cell, (1 - s) * 8 px per step).
+      EXPECT_LT((corr.x_earlier_px - x).norm(), 0.1) << corr.x_later_px.transpose();
+      EXPECT_NEAR(corr.variance_px2, 4 * kSigma * kSigma, 1e-12);  // four direct MVs
+    }
+  }
+}
+
+TEST(SegmentMergerTest, ChainingOffKeepsOneFrameSegmentsAndIFramesBreakChains) {
+  MergeOptions off;
+  off.chain_min_frames = 1;
+  SegmentMerger merger(160, 128, kSigma, off);
+  int pairs = 0;
+  for (int i = 0; i <= 4; ++i) {
+    if (auto p = merger.Push(ZoomFrame(i, 10, 8, 0.99, {0, 0}))) {
+      ++pairs;
+      EXPECT_EQ(p->later_index - p->earlier_index, 1);
+    }
+  }
+  EXPECT_EQ(pairs, 4);
+  // With chaining, an I frame in the middle restarts the chain.
+  SegmentMerger chained(160, 128, kSigma);
+  std::vector<AnchorPair> out;
+  for (int i = 0; i <= 9; ++i) {
+    FrameRecord f = ZoomFrame(i, 10, 8, 0.99, {0, 0});
+    if (i == 2) {
+      f.type = PictureType::kI;
+      f.mvs.clear();
+    }
+    if (auto p = chained.Push(f)) out.push_back(*p);
+  }
+  // The pair 1 -> 2 into the I frame carries no vectors (PI without B frames)
+  // and ends the chain started at 0; then 2 -> 6 is chained.
+  ASSERT_GE(out.size(), 2u);
+  EXPECT_EQ(out[0].later_index, 2);
+  EXPECT_TRUE(out[0].correspondences.empty());
+  EXPECT_EQ(out[1].earlier_index, 2);
+  EXPECT_EQ(out[1].later_index, 6);
+}
+
+}  // namespace
+}  // namespace slapse
+
+namespace slapse {
+namespace {
+
+TEST(SegmentMergerTest, ChainsARealH264IpppStreamIntoFourFrameSegments) {
+  const std::string path = testing::MakeTempDir("ippp_chain") + "/pan.ts";
+  EncoderOptions eo;
+  eo.codec = VideoCodec::kH264;
+  eo.b_frames = 0;
+  eo.gop_size = 60;
+  eo.quality = 18;
+  const double vx = 1.5, vy = -0.5;  // px per frame
+  ASSERT_TRUE(testing::WritePan(path, eo, 17, vx, vy).ok());
+  auto reader = MvReader::Open(path);
+  ASSERT_TRUE(reader.ok());
+  SegmentMerger merger(320, 240, (*reader)->info().mv_sigma_px());
+  FrameRecord f;
+  std::vector<AnchorPair> pairs;
+  while ((*reader)->Next(&f).ok()) {
+    if (auto p = merger.Push(f)) pairs.push_back(*p);
+  }
+  ASSERT_EQ(pairs.size(), 4u);  // 0-4, 4-8, 8-12, 12-16
+  for (const AnchorPair& pair : pairs) {
+    EXPECT_EQ(pair.later_index - pair.earlier_index, 4);
+    std::vector<double> dx, dy;
+    for (const Correspondence& c : pair.correspondences) {
+      dx.push_back(c.x_earlier_px.x() - c.x_later_px.x());
+      dy.push_back(c.x_earlier_px.y() - c.x_later_px.y());
+    }
+    ASSERT_GT(dx.size(), 100u);
+    std::nth_element(dx.begin(), dx.begin() + dx.size() / 2, dx.end());
+    std::nth_element(dy.begin(), dy.begin() + dy.size() / 2, dy.end());
+    // Four frames of pan: the chained displacement is -4 v (quarter-pel steps).
+    EXPECT_NEAR(dx[dx.size() / 2], -4 * vx, 0.25);
+    EXPECT_NEAR(dy[dy.size() / 2], -4 * vy, 0.25);
+  }
 }
 
 }  // namespace

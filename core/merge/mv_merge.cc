@@ -124,6 +124,7 @@ SegmentMerger::SegmentMerger(int width_px, int height_px, double sigma_px, Merge
 void SegmentMerger::Reset() {
   earlier_.reset();
   b_frames_.clear();
+  chain_.reset();
 }
 
 int SegmentMerger::CellOf(const Eigen::Vector2d& x_px) const {
@@ -147,11 +148,90 @@ std::optional<AnchorPair> SegmentMerger::Push(const FrameRecord& frame) {
   if (!IsAnchor(frame.type)) return std::nullopt;
   std::optional<AnchorPair> pair;
   if (earlier_.has_value()) pair = Build(frame);
+  const bool chainable = pair.has_value() && options_.chain_min_frames > 1 &&
+                         frame.type == PictureType::kP && b_frames_.empty() &&
+                         pair->later_index - pair->earlier_index < options_.chain_min_frames;
+  if (chainable) {
+    pair = Chain(std::move(*pair));
+  } else {
+    chain_.reset();
+  }
   earlier_ = frame;
   earlier_->mvs.clear();
   earlier_->luma.clear();
   b_frames_.clear();
   return pair;
+}
+
+bool SegmentMerger::ChainLookup(const std::vector<const Correspondence*>& by_cell,
+                                const Eigen::Vector2d& x, Eigen::Vector2d* start,
+                                double* variance) const {
+  // Displacement field D(c) = start(c) - later(c) on the cells of the chain's
+  // last anchor, interpolated bilinearly between the four cell centres around
+  // x; where one of them is empty, the cell containing x alone.
+  const double u = (x.x() - 7.5) / 16.0, v = (x.y() - 7.5) / 16.0;
+  const int c0 = static_cast<int>(std::floor(u)), r0 = static_cast<int>(std::floor(v));
+  const double fu = u - c0, fv = v - r0;
+  Eigen::Vector2d disp = Eigen::Vector2d::Zero();
+  double var = 0.0;
+  bool all = true;
+  for (int dr = 0; dr < 2 && all; ++dr) {
+    for (int dc = 0; dc < 2 && all; ++dc) {
+      const int col = c0 + dc, row = r0 + dr;
+      const Correspondence* c = (col >= 0 && row >= 0 && col < mb_cols_ && row < mb_rows_)
+                                    ? by_cell[row * mb_cols_ + col]
+                                    : nullptr;
+      if (c == nullptr) {
+        all = false;
+        break;
+      }
+      const double w = (dc ? fu : 1 - fu) * (dr ? fv : 1 - fv);
+      disp += w * (c->x_earlier_px - c->x_later_px);
+      var += w * c->variance_px2;
+    }
+  }
+  if (!all) {
+    const int cell = CellOf(x);
+    if (cell < 0 || by_cell[cell] == nullptr) return false;
+    disp = by_cell[cell]->x_earlier_px - by_cell[cell]->x_later_px;
+    var = by_cell[cell]->variance_px2;
+  }
+  *start = x + disp;
+  *variance = var;
+  return true;
+}
+
+std::optional<AnchorPair> SegmentMerger::Chain(AnchorPair step) {
+  if (chain_.has_value() && chain_->later_index == step.earlier_index) {
+    // Compose: a point of the new anchor -> the previous anchor (this step's
+    // vector) -> the chain's first anchor (the chain's field there).
+    AnchorPair chained = step;
+    chained.earlier_index = chain_->earlier_index;
+    chained.earlier_timestamp_s = chain_->earlier_timestamp_s;
+    chained.type = chain_->type == SegmentType::kIP ? SegmentType::kIP : SegmentType::kPP;
+    chained.n_b = static_cast<int>(chained.later_index - chained.earlier_index - 1);
+    chained.correspondences.clear();
+    std::vector<const Correspondence*> by_cell(static_cast<size_t>(mb_cols_) * mb_rows_, nullptr);
+    for (const Correspondence& c : chain_->correspondences) by_cell[c.mb_index] = &c;
+    for (const Correspondence& c : step.correspondences) {
+      Eigen::Vector2d start;
+      double var;
+      if (!ChainLookup(by_cell, c.x_earlier_px, &start, &var)) continue;
+      Correspondence out = c;
+      out.x_earlier_px = start;
+      out.variance_px2 = c.variance_px2 + var;  // independent errors add
+      chained.correspondences.push_back(out);
+    }
+    chain_ = std::move(chained);
+  } else {
+    chain_ = std::move(step);
+  }
+  if (chain_->later_index - chain_->earlier_index < options_.chain_min_frames) {
+    return std::nullopt;
+  }
+  std::optional<AnchorPair> done = std::move(chain_);
+  chain_.reset();
+  return done;
 }
 
 AnchorPair SegmentMerger::Build(const FrameRecord& later) const {

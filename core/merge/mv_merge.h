@@ -39,6 +39,13 @@ struct MergeOptions {
   double gate_min_px = 1.0;
   bool use_direct = true;
   bool use_indirect = true;
+  // IPPP streams (no B frames, one frame between anchors) have too little
+  // parallax per segment (ALGORITHM.md §7): P-frame vector fields are chained
+  // (composed, interpolating the earlier field bilinearly between macroblock
+  // cells) until the anchors are at least this many frames apart, and one
+  // pair is emitted per chain. Segments with B frames are never chained.
+  // 1 turns chaining off.
+  int chain_min_frames = 4;
 };
 
 // One candidate correspondence of a cell.
@@ -95,12 +102,23 @@ class SegmentMerger {
  private:
   int CellOf(const Eigen::Vector2d& x_px) const;  // -1 outside the frame
   AnchorPair Build(const FrameRecord& later) const;
+  // Extends the chain by a one-segment P pair; returns the chained pair when
+  // it is long enough.
+  std::optional<AnchorPair> Chain(AnchorPair step);
+  // Chained start point (in the chain's first anchor) of point x of the
+  // chain's last anchor, with its variance; false where the field is empty.
+  // by_cell: the chain's correspondences indexed by macroblock cell.
+  bool ChainLookup(const std::vector<const Correspondence*>& by_cell, const Eigen::Vector2d& x,
+                   Eigen::Vector2d* start, double* variance) const;
 
   int width_px_, height_px_, mb_cols_, mb_rows_;
   double sigma_px_;
   MergeOptions options_;
   std::optional<FrameRecord> earlier_;  // the last anchor (vectors dropped)
   std::vector<FrameRecord> b_frames_;   // B frames since it
+  // P-frame chain: the pair from the chain's first anchor to its last one,
+  // with one correspondence per macroblock cell of the last anchor (or none).
+  std::optional<AnchorPair> chain_;
 };
 
 }  // namespace slapse
