@@ -430,3 +430,31 @@ TEST(SegmentMergerTest, ChainsARealH264IpppStreamIntoFourFrameSegments) {
 
 }  // namespace
 }  // namespace slapse
+
+namespace slapse {
+namespace {
+
+TEST(SegmentMergerTest, StopsMergingBFramesOnceABPyramidShows) {
+  SegmentMerger merger(64, 64, kSigma);
+  merger.Push(Frame(0, PictureType::kI, -1, -1, 0.5));
+  // Decoding order 0, 4, 2, 1, 3: B2 is a reference (pyramid).
+  const int64_t coded[] = {0, 3, 2, 4};
+  for (int b = 1; b <= 3; ++b) {
+    FrameRecord f = Frame(b, PictureType::kB, 0, 4, 0.5);
+    f.coded_index = coded[b];
+    merger.Push(f);
+  }
+  FrameRecord p = Frame(4, PictureType::kP, 0, -1, 0.5);
+  p.coded_index = 1;
+  auto pair = merger.Push(p);
+  ASSERT_TRUE(pair);
+  EXPECT_TRUE(merger.b_pyramid_seen());
+  ASSERT_FALSE(pair->correspondences.empty());
+  for (const Correspondence& c : pair->correspondences) {
+    EXPECT_EQ(c.n_indirect, 0);
+    EXPECT_EQ(c.n_direct, 1);
+  }
+}
+
+}  // namespace
+}  // namespace slapse

@@ -382,3 +382,43 @@ TEST(MvReaderErrors, InterruptCancelsOpen) {
 
 }  // namespace
 }  // namespace slapse
+
+namespace slapse {
+namespace {
+
+// FFmpeg does not say which reference an H.264 vector uses: B-pyramids and
+// multiple references must be detected and reported, not guessed.
+TEST(MvReaderTest, ReportsH264BPyramidAndMultipleReferences) {
+  EncoderOptions plain;
+  plain.codec = VideoCodec::kH264;
+  plain.b_frames = 3;
+  plain.gop_size = 24;
+  plain.quality = 20;
+  EncoderOptions pyramid = plain;
+  pyramid.h264_b_pyramid = true;
+  pyramid.h264_refs = 3;
+  EncoderOptions ippp_refs = plain;
+  ippp_refs.b_frames = 0;
+  ippp_refs.h264_refs = 3;
+  struct Case {
+    EncoderOptions opts;
+    bool b_pyramid, extra_refs;
+  };
+  for (const Case& c :
+       {Case{plain, false, false}, Case{pyramid, true, true}, Case{ippp_refs, false, true}}) {
+    const std::string path = MakeTempDir("pyramid") + "/pan.ts";
+    ASSERT_TRUE(WritePan(path, c.opts, 25, kVx, kVy).ok());
+    auto reader = MvReader::Open(path);
+    ASSERT_TRUE(reader.ok());
+    FrameRecord f;
+    while ((*reader)->Next(&f).ok()) {
+    }
+    const StreamInfo& info = (*reader)->info();
+    EXPECT_EQ(info.b_pyramid, c.b_pyramid) << "refs " << c.opts.h264_refs;
+    EXPECT_EQ(info.extra_references(), c.extra_refs)
+        << "max_ref_frames " << info.max_ref_frames << ", n_B " << info.max_consecutive_b;
+  }
+}
+
+}  // namespace
+}  // namespace slapse

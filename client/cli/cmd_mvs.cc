@@ -159,6 +159,17 @@ int RunMvs(int argc, char** argv) {
         static_cast<long long>(type_count[PictureType::kB]), info.max_consecutive_b,
         info.mv_precision_denom, info.mv_sigma_px(),
         info.b_frame_mvs ? "" : ", B-frame MVs not exported by this decoder");
+    if (info.b_pyramid || info.extra_references()) {
+      std::printf(
+          "references %s%s%s: FFmpeg does not say which reference a vector uses; slapse "
+          "merges %s\n",
+          info.b_pyramid ? "B-pyramid (B frames are references)" : "",
+          info.b_pyramid && info.extra_references() ? ", " : "",
+          info.extra_references()
+              ? ("up to " + std::to_string(info.max_ref_frames) + " reference frames").c_str()
+              : "",
+          info.b_pyramid ? "direct vectors only" : "vectors as if they used the nearest anchor");
+    }
     std::printf("vectors    %lld (past %lld, future %lld)\n", static_cast<long long>(past + future),
                 static_cast<long long>(past), static_cast<long long>(future));
     std::printf("|motion|   median %.2f px in P frames, %.2f px in B frames\n", Median(p_motion),

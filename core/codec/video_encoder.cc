@@ -100,11 +100,14 @@ StatusOr<std::unique_ptr<VideoEncoder>> VideoEncoder::Open(const std::string& pa
   if (o.codec == VideoCodec::kH264) {
     av_dict_set(&opts, "preset", "veryfast", 0);
     av_dict_set_int(&opts, "crf", o.quality, 0);
-    // Fixed GOP: no adaptive B placement, no B-pyramid, one reference, no scene cuts,
-    // so every B frame refers to its two neighbouring anchors (ALGORITHM.md §7).
+    // Fixed GOP: no adaptive B placement and no scene cuts; by default no
+    // B-pyramid and one reference, so every B frame refers to its two
+    // neighbouring anchors (ALGORITHM.md §7).
     const std::string params =
-        "scenecut=0:b-adapt=0:b-pyramid=none:ref=1:bframes=" + std::to_string(o.b_frames) +
-        ":keyint=" + std::to_string(o.gop_size) + ":min-keyint=" + std::to_string(o.gop_size);
+        std::string("scenecut=0:b-adapt=0:b-pyramid=") + (o.h264_b_pyramid ? "normal" : "none") +
+        ":ref=" + std::to_string(std::max(1, o.h264_refs)) +
+        ":bframes=" + std::to_string(o.b_frames) + ":keyint=" + std::to_string(o.gop_size) +
+        ":min-keyint=" + std::to_string(o.gop_size);
     av_dict_set(&opts, "x264-params", params.c_str(), 0);
   } else {
     if (o.quality < 1 || o.quality > 31) {

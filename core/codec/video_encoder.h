@@ -35,6 +35,11 @@ struct EncoderOptions {
   int quality = 4;
   // MPEG-4 Part 2 only: quarter-pel motion vectors.
   bool mpeg4_qpel = false;
+  // H.264 only: reference structure. The defaults give the plain GOP the
+  // method assumes (B frames refer to their two anchors); cameras and
+  // encoders often use B-pyramids and several references.
+  bool h264_b_pyramid = false;
+  int h264_refs = 1;
 };
 
 class VideoEncoder {

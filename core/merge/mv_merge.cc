@@ -140,6 +140,9 @@ int SegmentMerger::CellOf(const Eigen::Vector2d& x_px) const {
 std::optional<AnchorPair> SegmentMerger::Push(const FrameRecord& frame) {
   if (frame.type == PictureType::kB) {
     // Keep only B frames that sit between the current anchor and a later one.
+    for (const FrameRecord& b : b_frames_) {
+      if (frame.coded_index >= 0 && b.coded_index > frame.coded_index) b_pyramid_seen_ = true;
+    }
     if (earlier_.has_value() && frame.prev_anchor_index == earlier_->index && !frame.corrupt) {
       b_frames_.push_back(frame);
     }
@@ -261,7 +264,7 @@ AnchorPair SegmentMerger::Build(const FrameRecord& later) const {
     }
   }
   // Indirect: B blocks with both a past (f) and a future (g) vector.
-  if (options_.use_indirect) {
+  if (options_.use_indirect && !b_pyramid_seen_) {
     for (const FrameRecord& b : b_frames_) {
       if (b.next_anchor_index != later.index) continue;
       // FFmpeg exports a bi-predicted block as two entries with the same block.

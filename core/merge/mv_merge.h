@@ -92,10 +92,14 @@ class SegmentMerger {
   SegmentMerger(int width_px, int height_px, double sigma_px, MergeOptions options = {});
 
   // Feeds the next frame. Returns the pair (previous anchor, this anchor) when
-  // `frame` is an anchor that closes a segment.
+  // `frame` is an anchor that closes a segment. Where B frames turn out to be
+  // references (a B-pyramid: one decoded before a B shown earlier, see
+  // StreamInfo::b_pyramid) their vectors may point to another B frame, so
+  // from then on B frames are not merged: direct vectors only.
   std::optional<AnchorPair> Push(const FrameRecord& frame);
   void Reset();
 
+  bool b_pyramid_seen() const { return b_pyramid_seen_; }
   int mb_cols() const { return mb_cols_; }
   int mb_rows() const { return mb_rows_; }
 
@@ -119,6 +123,7 @@ class SegmentMerger {
   // P-frame chain: the pair from the chain's first anchor to its last one,
   // with one correspondence per macroblock cell of the last anchor (or none).
   std::optional<AnchorPair> chain_;
+  bool b_pyramid_seen_ = false;
 };
 
 }  // namespace slapse

@@ -44,6 +44,8 @@ struct FrameRecord {
   int64_t next_anchor_index = -1;
   // Decoder reported damage (concealed errors) in this frame; its vectors are suspect.
   bool corrupt = false;
+  // Position in decoding order (FFmpeg's coded_picture_number), -1 if unknown.
+  int64_t coded_index = -1;
   std::vector<MotionVector> mvs;
   // Decoded luma plane (width x height, row-major), only when
   // MvReaderOptions::keep_luma is set; empty otherwise.
@@ -65,6 +67,22 @@ struct StreamInfo {
   // Part 2 and H.263 in FFmpeg 5.1 never write a B picture's motion table):
   // the reader then yields B frames without vectors rather than garbage.
   bool b_frame_mvs = true;
+  // Reference structures that break the "nearest anchor" reading of MVs
+  // (ALGORITHM.md §7). FFmpeg does not export which reference a vector uses,
+  // so these are detected and reported, never guessed:
+  //  - b_pyramid: some B frame is decoded before a B frame shown earlier
+  //    between the same anchors, i.e. B frames serve as references; their
+  //    vectors may point to another B frame instead of an anchor.
+  //  - max_ref_frames: the decoder's reference count (H.264 SPS
+  //    num_ref_frames; 1 for MPEG).
+  bool b_pyramid = false;
+  int max_ref_frames = 1;
+  // The stream keeps more references than its anchors need (one for IPPP,
+  // two with B frames, one more for a B-pyramid): a vector may point to an
+  // older frame than the anchor the merger assumes.
+  bool extra_references() const {
+    return max_ref_frames > (max_consecutive_b > 0 ? 2 : 1) + (b_pyramid ? 1 : 0);
+  }
 };
 
 // Counters the reader keeps while decoding; errors here end the stream with DATA_LOSS.

@@ -225,6 +225,8 @@ void MvReader::Collect(AVFrame* f) {
     rec.timestamp_s = static_cast<double>(rec.index) / info_.fps;
   }
   rec.corrupt = f->decode_error_flags != 0 || (f->flags & AV_FRAME_FLAG_CORRUPT) != 0;
+  rec.coded_index = f->coded_picture_number;
+  info_.max_ref_frames = std::max(info_.max_ref_frames, dec_->refs);
   if (rec.corrupt) {
     ++stats_.corrupt_frames;
     char where[96];
@@ -267,7 +269,16 @@ void MvReader::Collect(AVFrame* f) {
   // GOP bookkeeping: B frames wait in pending_ until their next anchor is decoded.
   rec.prev_anchor_index = last_anchor_index_;
   if (!IsAnchor(rec.type)) {
-    if (rec.type == PictureType::kB) ++consecutive_b_;
+    if (rec.type == PictureType::kB) {
+      ++consecutive_b_;
+      // Between two anchors, B frames that are only predicted are decoded in
+      // display order; one decoded before an earlier-shown B is a reference.
+      for (const FrameRecord& b : pending_) {
+        if (b.type == PictureType::kB && rec.coded_index >= 0 && b.coded_index > rec.coded_index) {
+          info_.b_pyramid = true;
+        }
+      }
+    }
     pending_.push_back(std::move(rec));
     return;
   }
