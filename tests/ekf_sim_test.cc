@@ -1,0 +1,105 @@
+// The EKF on a simulated street drive, fed the simulator's true macroblock
+// correspondences (the ideal output of merging + plane extraction, with
+// 0.25 px noise): planes enter and leave the view as in a real drive. The
+// trajectory and plane errors must stay within bounds that a broken filter
+// (wrong transition, a lost scale, a bad Jacobian) misses by far.
+#include <map>
+#include <random>
+
+#include <gtest/gtest.h>
+
+#include "core/ekf/plane_ekf.h"
+#include "core/eval/plane_map_eval.h"
+#include "core/eval/trajectory_eval.h"
+#include "core/sim/simulate.h"
+#include "tests/test_streams.h"
+
+namespace slapse {
+namespace {
+
+TEST(EkfSimTest, TracksADriveFromTrueCorrespondences) {
+  SimulateOptions opt;
+  opt.seed = 2;
+  opt.duration_s = 4.0;
+  opt.output_dir = testing::MakeTempDir("ekf_sim");
+  SimulateReport report;
+  ASSERT_TRUE(SimulateDrive(opt, &report).ok());
+  auto gt = LoadGroundTruth(opt.output_dir);
+  ASSERT_TRUE(gt.ok());
+  const Intrinsics& K = gt->intrinsics;
+  std::mt19937_64 rng(1);
+  std::normal_distribution<double> noise(0, 0.25);
+
+  PlaneEkf ekf(K);
+  const int gap = 4;  // IBBBP anchors
+  const double dt = gap / opt.fps;
+  std::vector<TimedPose> est, truth;
+  std::vector<PlaneEstimate> planes;
+  Rigid3d world_from_cam;
+  for (size_t i = 0; i < gt->frames.size(); ++i) {
+    truth.push_back(
+        {static_cast<int64_t>(i), gt->frames[i].timestamp_s, gt->frames[i].world_from_cam});
+  }
+  est.push_back({0, 0.0, world_from_cam});
+  for (int k = gap; k < static_cast<int>(gt->frames.size()); k += gap) {
+    const Rigid3d& wl = gt->frames[k].world_from_cam;
+    const Rigid3d earlier_from_world = gt->frames[k - gap].world_from_cam.Inverse();
+    std::map<int, PlaneObservation> obs;
+    std::map<int, std::vector<int>> mbs;
+    for (int mb = 0; mb < gt->mb_cols * gt->mb_rows; ++mb) {
+      const int label = gt->frames[k].mb_labels[mb];
+      if (label < 0 || gt->planes[label].kind == PlaneKind::kBackground) continue;
+      const Eigen::Vector2d x(16 * (mb % gt->mb_cols) + 7.5, 16 * (mb / gt->mb_cols) + 7.5);
+      const GtPlane& p = gt->planes[label];
+      const Eigen::Vector3d ray = wl.rotation * K.Unproject(x);
+      const double s =
+          (p.distance_m - p.normal_world.dot(wl.translation)) / p.normal_world.dot(ray);
+      const Eigen::Vector3d x_e = earlier_from_world * (wl.translation + s * ray);
+      if (s <= 0 || x_e.z() < 0.5) continue;
+      PlaneObservation& o = obs[label];
+      o.track_id = label;
+      o.x_later_px.push_back(x);
+      o.x_earlier_px.push_back(K.Project(x_e) + Eigen::Vector2d(noise(rng), noise(rng)));
+      o.variance_px2.push_back(0.0625);
+      mbs[label].push_back(mb);
+    }
+    std::vector<PlaneObservation> v;
+    for (auto& [id, o] : obs) {
+      if (o.x_later_px.size() >= 20) v.push_back(std::move(o));
+    }
+    if (!ekf.initialized()) {
+      Rigid3d first = gt->frames[k - gap].world_from_cam.Inverse() * wl;
+      first.translation.normalize();  // up to scale: first step = 1, as the paper
+      ASSERT_TRUE(ekf.Initialize(first, dt).ok());
+    } else {
+      ASSERT_TRUE(ekf.Predict(dt).ok());
+    }
+    UpdateReport rep;
+    ASSERT_TRUE(ekf.Update(v, &rep).ok()) << "anchor " << k;
+    world_from_cam = world_from_cam * ekf.prev_from_cur();
+    est.push_back({k, gt->frames[k].timestamp_s, world_from_cam});
+    for (const PlaneTrack& t : ekf.planes())
+      planes.push_back({k, t.track_id, t.pi, mbs[t.track_id]});
+  }
+  auto terr = EvaluateTrajectory(est, truth);
+  ASSERT_TRUE(terr.ok());
+  auto perr = EvaluatePlaneMap(planes, *gt, terr->first_step_scale);
+  ASSERT_TRUE(perr.ok());
+  std::printf(
+      "%.1f m: eps_D %.2f %%, ATE %.3f m, RPE %.3f m / %.3f deg; %d planes: eps_d %.3f m, "
+      "eps_n %.2f deg\n",
+      terr->distance_m, 100 * terr->eps_D, terr->ate_rmse_m, terr->rpe_trans_rmse_m,
+      terr->rpe_rot_rmse_deg, perr->planes_evaluated, perr->eps_d_m, perr->eps_n_deg);
+  // Measured (seed 2, 35.6 m): eps_D 0.48 %, ATE 0.016 m, eps_d 0.14 m,
+  // eps_n 0.39 deg. Bounds at 2-4x those, far below what a lost scale or a
+  // wrong transition produces (tens of per cent, metres).
+  EXPECT_GT(terr->distance_m, 25.0);
+  EXPECT_LT(terr->eps_D, 0.015);
+  EXPECT_LT(terr->ate_rmse_m, 0.1);
+  EXPECT_GE(perr->planes_evaluated, 4);
+  EXPECT_LT(perr->eps_d_m, 0.3);
+  EXPECT_LT(perr->eps_n_deg, 1.5);
+}
+
+}  // namespace
+}  // namespace slapse
