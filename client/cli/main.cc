@@ -35,6 +35,14 @@ const Command kCommands[] = {
     {"planes", slapse::cli::RunPlanes, "extract planes and draw one anchor pair's (Fig. 5)"},
     {"eval-planes", slapse::cli::RunEvalPlanes,
      "plane extraction TP rate and recall on simulated drives (Table I)"},
+    {"serve", slapse::cli::RunServe, "run the gRPC server (sessions, upload, live watch)"},
+    {"create", slapse::cli::RunCreate, "create a session on a server (--upload)"},
+    {"upload", slapse::cli::RunUpload, "send a video file as a session's stream"},
+    {"watch", slapse::cli::RunWatch, "follow a session's poses, planes and state (resumable)"},
+    {"list", slapse::cli::RunList, "list a server's sessions"},
+    {"get", slapse::cli::RunGet, "show one session with its statistics"},
+    {"stop", slapse::cli::RunStop, "stop a session (keeps its results)"},
+    {"delete", slapse::cli::RunDelete, "stop and forget a session"},
 };
 
 void PrintUsage(FILE* out) {

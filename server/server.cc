@@ -1,0 +1,57 @@
+#include "server/server.h"
+
+#include <grpcpp/ext/proto_server_reflection_plugin.h>
+#include <grpcpp/health_check_service_interface.h>
+#include <grpcpp/security/server_credentials.h>
+#include <grpcpp/server_builder.h>
+
+namespace slapse::server {
+
+SlapseServer::SlapseServer(const ServerOptions& options)
+    : options_(options), manager_(options.sessions), service_(&manager_) {}
+
+StatusOr<std::unique_ptr<SlapseServer>> SlapseServer::Start(const ServerOptions& options) {
+  if (options.port < 0 || options.port > 65535) {
+    return InvalidArgumentError("port must be in [0, 65535], got " + std::to_string(options.port));
+  }
+  if (options.sessions.max_sessions < 1) {
+    return InvalidArgumentError("max_sessions must be >= 1");
+  }
+  grpc::EnableDefaultHealthCheckService(true);
+  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+  std::unique_ptr<SlapseServer> server(new SlapseServer(options));
+  grpc::ServerBuilder builder;
+  const std::string address = options.address + ":" + std::to_string(options.port);
+  builder.AddListeningPort(address, grpc::InsecureServerCredentials(), &server->port_);
+  builder.RegisterService(&server->service_);
+  builder.SetMaxReceiveMessageSize(16 << 20);
+  server->server_ = builder.BuildAndStart();
+  if (server->server_ == nullptr || server->port_ == 0) {
+    return UnavailableError("cannot listen on " + address + " (in use, or not a local address?)");
+  }
+  return server;
+}
+
+SlapseServer::~SlapseServer() { Shutdown(); }
+
+void SlapseServer::Shutdown() {
+  std::lock_guard<std::mutex> lock(shutdown_mu_);
+  if (shut_down_) return;
+  shut_down_ = true;
+  if (server_ == nullptr) return;
+  if (auto* health = server_->GetHealthCheckService()) health->Shutdown();
+  // Sessions first: that ends watch streams and blocked uploads, so the
+  // grace period below is rarely needed.
+  service_.BeginShutdown();
+  manager_.Shutdown();
+  const auto grace = std::chrono::duration_cast<std::chrono::system_clock::duration>(
+      std::chrono::duration<double>(options_.shutdown_grace_s));
+  server_->Shutdown(std::chrono::system_clock::now() + grace);
+  server_->Wait();
+}
+
+void SlapseServer::Wait() {
+  if (server_ != nullptr) server_->Wait();
+}
+
+}  // namespace slapse::server

@@ -1,0 +1,553 @@
+#include "server/session_manager.h"
+
+#include <google/protobuf/util/time_util.h>
+
+#include <cmath>
+#include <set>
+
+#include "core/mv/mv_reader.h"
+#include "core/pipeline/pipeline.h"
+
+namespace slapse::server {
+namespace {
+
+using google::protobuf::util::TimeUtil;
+using Clock = std::chrono::steady_clock;
+
+bool IsTerminal(v1::Session::State s) {
+  return s == v1::Session::FINISHED || s == v1::Session::FAILED || s == v1::Session::STOPPED;
+}
+
+bool Finite(double v) { return std::isfinite(v); }
+
+Status ValidateRequest(const v1::Session& r) {
+  switch (r.source_case()) {
+    case v1::Session::kUpload:
+      break;
+    case v1::Session::kRtspPull:
+      return UnimplementedError("RTSP pull sources are not served yet; create an upload session");
+    case v1::Session::kRtspPush:
+      return UnimplementedError("RTSP push sources are not served yet; create an upload session");
+    case v1::Session::kRtpSdp:
+      return UnimplementedError("RTP/SDP sources are not served yet; create an upload session");
+    case v1::Session::SOURCE_NOT_SET:
+      return InvalidArgumentError(
+          "session.source is required (upload, rtsp_pull, rtsp_push, rtp_sdp)");
+  }
+  if (!r.has_intrinsics()) {
+    return InvalidArgumentError("session.intrinsics is required (fx_px, fy_px, cx_px, cy_px)");
+  }
+  const v1::Intrinsics& k = r.intrinsics();
+  if (!Finite(k.fx_px()) || !Finite(k.fy_px()) || k.fx_px() <= 0 || k.fy_px() <= 0) {
+    return InvalidArgumentError("intrinsics: fx_px and fy_px must be finite and > 0, got " +
+                                std::to_string(k.fx_px()) + ", " + std::to_string(k.fy_px()));
+  }
+  if (!Finite(k.cx_px()) || !Finite(k.cy_px())) {
+    return InvalidArgumentError("intrinsics: cx_px and cy_px must be finite");
+  }
+  if (k.width_px() < 0 || k.height_px() < 0) {
+    return InvalidArgumentError(
+        "intrinsics: width_px and height_px must be >= 0 (0 = the stream's)");
+  }
+  const v1::PipelineOptions& p = r.pipeline_options();
+  if (!Finite(p.eps_h_px()) || p.eps_h_px() < 0 || p.eps_h_px() > 100) {
+    return InvalidArgumentError("pipeline_options.eps_h_px must be in [0, 100] px (0 = default)");
+  }
+  auto positive = [](double v) { return Finite(v) && v > 0; };
+  switch (p.scale_source()) {
+    case v1::PipelineOptions::FIRST_STEP:
+      if (!positive(p.first_step_m())) {
+        return InvalidArgumentError("pipeline_options.first_step_m must be > 0 for FIRST_STEP");
+      }
+      break;
+    case v1::PipelineOptions::SPEED:
+      if (!positive(p.speed_mps())) {
+        return InvalidArgumentError("pipeline_options.speed_mps must be > 0 for SPEED");
+      }
+      break;
+    case v1::PipelineOptions::CAMERA_HEIGHT:
+      if (!positive(p.camera_height_m())) {
+        return InvalidArgumentError(
+            "pipeline_options.camera_height_m must be > 0 for CAMERA_HEIGHT");
+      }
+      break;
+    default:
+      break;
+  }
+  return Status::Ok();
+}
+
+PipelineOptions ToPipelineOptions(const v1::PipelineOptions& p) {
+  PipelineOptions o;
+  if (p.eps_h_px() > 0) o.extraction.eps_h_px = p.eps_h_px();
+  switch (p.scale_source()) {
+    case v1::PipelineOptions::FIRST_STEP:
+      o.scale.source = ScaleOptions::Source::kFirstStep;
+      o.scale.first_step_m = p.first_step_m();
+      break;
+    case v1::PipelineOptions::SPEED:
+      o.scale.source = ScaleOptions::Source::kSpeed;
+      o.scale.speed_mps = p.speed_mps();
+      break;
+    case v1::PipelineOptions::CAMERA_HEIGHT:
+      o.scale.source = ScaleOptions::Source::kCameraHeight;
+      o.scale.camera_height_m = p.camera_height_m();
+      break;
+    default:
+      break;
+  }
+  return o;
+}
+
+void SetPose(const Rigid3d& t, v1::Pose* out) {
+  out->set_tx(t.translation.x());
+  out->set_ty(t.translation.y());
+  out->set_tz(t.translation.z());
+  out->set_qx(t.rotation.x());
+  out->set_qy(t.rotation.y());
+  out->set_qz(t.rotation.z());
+  out->set_qw(t.rotation.w());
+}
+
+void SetVec(const Eigen::Vector3d& v, v1::Vec3* out) {
+  out->set_x(v.x());
+  out->set_y(v.y());
+  out->set_z(v.z());
+}
+
+v1::PlaneMap::Plane ToPlane(const MapPlane& p) {
+  v1::PlaneMap::Plane out;
+  out.set_track_id(p.track_id);
+  SetVec(p.normal_world, out.mutable_normal_world());
+  out.set_distance(p.distance_m);
+  out.set_first_seen_s(p.first_seen_s);
+  out.set_last_seen_s(p.last_seen_s);
+  out.set_observations(p.observations);
+  return out;
+}
+
+}  // namespace
+
+struct SessionManager::Session {
+  Session(std::string n, size_t ring, UploadQueueOptions q)
+      : name(std::move(n)),
+        events(std::make_shared<EventLog>(ring)),
+        upload(std::make_shared<UploadQueue>(q)) {}
+
+  const std::string name;
+  std::shared_ptr<EventLog> events;  // shared with watchers
+  std::shared_ptr<UploadQueue> upload;
+  std::atomic<bool> stop{false};
+
+  mutable std::mutex mu;  // guards everything below
+  v1::Session proto;      // state, stats, error, times (last_sequence filled on read)
+  bool upload_started = false;
+  Status ingest_error;  // why the upload broke off, if it did
+  std::vector<v1::Trajectory::Point> trajectory;
+  std::map<int, v1::PlaneMap::Plane> planes;
+  bool metric = false;
+
+  // Moves to `state` unless already terminal; appends the StateChange event
+  // and, for a terminal state, closes the event log. Call with `mu` held.
+  bool TransitionLocked(v1::Session::State state, const Status& why, const std::string& message) {
+    if (IsTerminal(proto.state()) || proto.state() == state) return false;
+    proto.set_state(state);
+    *proto.mutable_update_time() = TimeUtil::GetCurrentTime();
+    if (!why.ok()) {
+      proto.mutable_error()->set_code(static_cast<int>(why.code()));
+      proto.mutable_error()->set_message(why.message());
+    }
+    v1::SessionEvent e;
+    e.mutable_state_change()->set_state(state);
+    e.mutable_state_change()->set_message(why.ok() ? message : why.message());
+    e.mutable_state_change()->set_error_code(static_cast<int>(why.code()));
+    events->Append(std::move(e));
+    if (IsTerminal(state)) {
+      events->Close();
+      upload->Close(
+          why.ok() ? FailedPreconditionError("the session is " + v1::Session::State_Name(state))
+                   : why);
+    }
+    return true;
+  }
+  bool Transition(v1::Session::State state, const Status& why, const std::string& message = "") {
+    std::lock_guard<std::mutex> lock(mu);
+    return TransitionLocked(state, why, message);
+  }
+  v1::Session Snapshot() const {
+    std::lock_guard<std::mutex> lock(mu);
+    v1::Session out = proto;
+    out.set_last_sequence(events->last_sequence());
+    return out;
+  }
+};
+
+SessionManager::SessionManager(SessionManagerOptions options) : options_(options) {
+  const int n = options_.max_sessions < 1 ? 1 : options_.max_sessions;
+  for (int i = 0; i < n; ++i) workers_.emplace_back([this] { WorkerLoop(); });
+}
+
+SessionManager::~SessionManager() { Shutdown(); }
+
+int SessionManager::ActiveCountLocked() const {
+  int n = 0;
+  for (const auto& [id, s] : sessions_) {
+    std::lock_guard<std::mutex> lock(s->mu);
+    n += !IsTerminal(s->proto.state());
+  }
+  return n;
+}
+
+StatusOr<v1::Session> SessionManager::Create(const v1::Session& request) {
+  SLAPSE_RETURN_IF_ERROR(ValidateRequest(request));
+  std::shared_ptr<Session> s;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (shutting_down_) return UnavailableError("the server is shutting down");
+    const int active = ActiveCountLocked();
+    if (active >= options_.max_sessions) {
+      return ResourceExhaustedError(
+          "the server is at capacity: " + std::to_string(active) + " of " +
+          std::to_string(options_.max_sessions) +
+          " sessions active; stop or delete one, or retry later (serve --max-sessions)");
+    }
+    const uint64_t id = next_id_++;
+    UploadQueueOptions q;
+    q.capacity_bytes = options_.upload_buffer_bytes;
+    q.max_total_bytes = options_.max_upload_bytes;
+    s = std::make_shared<Session>("sessions/" + std::to_string(id), options_.event_ring_capacity,
+                                  q);
+    s->proto = request;
+    s->proto.set_name(s->name);
+    s->proto.clear_stats();
+    s->proto.clear_error();
+    s->proto.set_state(v1::Session::STATE_UNSPECIFIED);
+    *s->proto.mutable_create_time() = TimeUtil::GetCurrentTime();
+    s->Transition(v1::Session::CREATED, Status::Ok(), "created; waiting for the stream");
+    sessions_[id] = s;
+    queue_.push_back(s);
+  }
+  work_ready_.notify_one();
+  return s->Snapshot();
+}
+
+StatusOr<std::shared_ptr<SessionManager::Session>> SessionManager::Find(
+    const std::string& name) const {
+  const std::string prefix = "sessions/";
+  uint64_t id = 0;
+  bool ok = name.size() > prefix.size() && name.compare(0, prefix.size(), prefix) == 0 &&
+            name.size() - prefix.size() <= 19;
+  for (size_t i = prefix.size(); ok && i < name.size(); ++i) {
+    ok = name[i] >= '0' && name[i] <= '9';
+    id = id * 10 + (name[i] - '0');
+  }
+  if (!ok) return InvalidArgumentError("'" + name + "' is not a session name (sessions/{id})");
+  std::lock_guard<std::mutex> lock(mu_);
+  auto it = sessions_.find(id);
+  if (it == sessions_.end()) return NotFoundError("no session '" + name + "' on this server");
+  return it->second;
+}
+
+StatusOr<v1::Session> SessionManager::Get(const std::string& name) const {
+  auto s = Find(name);
+  if (!s.ok()) return s.status();
+  return (*s)->Snapshot();
+}
+
+StatusOr<v1::ListSessionsResponse> SessionManager::List(
+    const v1::ListSessionsRequest& request) const {
+  if (request.page_size() < 0) return InvalidArgumentError("page_size must be >= 0");
+  const size_t page_size =
+      request.page_size() == 0 ? 50 : std::min<size_t>(request.page_size(), 1000);
+  uint64_t after = 0;
+  if (!request.page_token().empty()) {
+    char* end = nullptr;
+    after = std::strtoull(request.page_token().c_str(), &end, 10);
+    if (end == nullptr || *end != '\0') return InvalidArgumentError("bad page_token");
+  }
+  std::vector<std::shared_ptr<Session>> candidates;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    for (auto it = sessions_.upper_bound(after); it != sessions_.end(); ++it) {
+      candidates.push_back(it->second);
+    }
+  }
+  v1::ListSessionsResponse out;
+  for (size_t i = 0; i < candidates.size(); ++i) {
+    v1::Session snap = candidates[i]->Snapshot();
+    if (request.state_filter() != v1::Session::STATE_UNSPECIFIED &&
+        snap.state() != request.state_filter()) {
+      continue;
+    }
+    if (static_cast<size_t>(out.sessions_size()) == page_size) {
+      // More follow: the token is the id of the last session returned.
+      const std::string& last = out.sessions(out.sessions_size() - 1).name();
+      out.set_next_page_token(last.substr(std::string("sessions/").size()));
+      break;
+    }
+    *out.add_sessions() = std::move(snap);
+  }
+  return out;
+}
+
+void SessionManager::StopSession(Session* s, const std::string& why) {
+  s->stop = true;
+  s->Transition(v1::Session::STOPPED, Status::Ok(), why);
+}
+
+StatusOr<v1::Session> SessionManager::Stop(const std::string& name) {
+  auto s = Find(name);
+  if (!s.ok()) return s.status();
+  StopSession(s->get(), "stopped by StopSession");
+  return (*s)->Snapshot();
+}
+
+Status SessionManager::Delete(const std::string& name) {
+  auto s = Find(name);
+  if (!s.ok()) return s.status();
+  StopSession(s->get(), "deleted");
+  std::lock_guard<std::mutex> lock(mu_);
+  for (auto it = sessions_.begin(); it != sessions_.end(); ++it) {
+    if (it->second == *s) {
+      sessions_.erase(it);
+      break;
+    }
+  }
+  return Status::Ok();
+}
+
+StatusOr<v1::Session> SessionManager::Upload(const std::string& name, std::string first_bytes,
+                                             const std::function<bool(std::string*)>& next,
+                                             const std::function<bool()>& cancelled) {
+  auto found = Find(name);
+  if (!found.ok()) return found.status();
+  Session* s = found->get();
+  {
+    std::lock_guard<std::mutex> lock(s->mu);
+    if (!s->proto.has_upload()) {
+      return FailedPreconditionError(name + " is not an upload session");
+    }
+    if (IsTerminal(s->proto.state())) {
+      return FailedPreconditionError(name + " is " + v1::Session::State_Name(s->proto.state()));
+    }
+    if (s->upload_started) {
+      return FailedPreconditionError(name + " already received its upload (one per session)");
+    }
+    s->upload_started = true;
+    s->TransitionLocked(v1::Session::RUNNING, Status::Ok(), "upload started");
+  }
+  Status st = s->upload->Write(std::move(first_bytes), cancelled);
+  std::string chunk;
+  while (st.ok() && next(&chunk)) st = s->upload->Write(std::move(chunk), cancelled);
+  if (!st.ok()) {
+    if (st.code() == StatusCode::kCancelled || st.code() == StatusCode::kResourceExhausted) {
+      {
+        std::lock_guard<std::mutex> lock(s->mu);
+        if (s->ingest_error.ok()) s->ingest_error = st;
+      }
+      s->upload->Close(st);
+    }
+    // A session that ended on its own reports its own error.
+    v1::Session snap = s->Snapshot();
+    if (snap.state() == v1::Session::FAILED && snap.error().code() != 0) {
+      return Status(static_cast<StatusCode>(snap.error().code()), snap.error().message());
+    }
+    return st;
+  }
+  s->upload->Finish();
+  return s->Snapshot();
+}
+
+StatusOr<std::shared_ptr<EventLog>> SessionManager::Events(const std::string& name) const {
+  auto s = Find(name);
+  if (!s.ok()) return s.status();
+  return (*s)->events;
+}
+
+StatusOr<v1::Trajectory> SessionManager::GetTrajectory(const std::string& name) const {
+  auto found = Find(name);
+  if (!found.ok()) return found.status();
+  const Session& s = **found;
+  v1::Trajectory out;
+  std::lock_guard<std::mutex> lock(s.mu);
+  out.set_name(s.name);
+  out.set_metric(s.metric);
+  for (const auto& p : s.trajectory) *out.add_points() = p;
+  out.set_last_sequence(s.events->last_sequence());
+  return out;
+}
+
+StatusOr<v1::PlaneMap> SessionManager::GetPlaneMap(const std::string& name) const {
+  auto found = Find(name);
+  if (!found.ok()) return found.status();
+  const Session& s = **found;
+  v1::PlaneMap out;
+  std::lock_guard<std::mutex> lock(s.mu);
+  out.set_name(s.name);
+  out.set_metric(s.metric);
+  for (const auto& [id, p] : s.planes) *out.add_planes() = p;
+  out.set_last_sequence(s.events->last_sequence());
+  return out;
+}
+
+void SessionManager::Shutdown() {
+  std::vector<std::shared_ptr<Session>> all;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (shutting_down_ && workers_.empty()) return;
+    shutting_down_ = true;
+    for (const auto& [id, s] : sessions_) all.push_back(s);
+  }
+  for (const auto& s : all) StopSession(s.get(), "the server is shutting down");
+  work_ready_.notify_all();
+  for (std::thread& t : workers_) {
+    if (t.joinable()) t.join();
+  }
+  std::lock_guard<std::mutex> lock(mu_);
+  workers_.clear();
+}
+
+void SessionManager::WorkerLoop() {
+  for (;;) {
+    std::shared_ptr<Session> s;
+    {
+      std::unique_lock<std::mutex> lock(mu_);
+      work_ready_.wait(lock, [&] { return shutting_down_ || !queue_.empty(); });
+      if (queue_.empty()) return;  // shutting down and nothing left
+      s = std::move(queue_.front());
+      queue_.pop_front();
+    }
+    RunSession(s);
+  }
+}
+
+void SessionManager::RunSession(const std::shared_ptr<Session>& s) {
+  // Ends the session: STOPPED if asked to stop, else FINISHED / FAILED.
+  auto end = [&](Status status) {
+    std::lock_guard<std::mutex> lock(s->mu);
+    if (!s->ingest_error.ok()) status = s->ingest_error;
+    if (s->stop) {
+      s->TransitionLocked(v1::Session::STOPPED, Status::Ok(), "stopped");
+    } else if (status.code() == StatusCode::kOutOfRange) {
+      s->TransitionLocked(v1::Session::FINISHED, Status::Ok(), "the stream ended");
+    } else {
+      s->TransitionLocked(v1::Session::FAILED, status, "");
+    }
+  };
+  if (s->stop) return end(CancelledError("stopped"));
+
+  MvReaderOptions reader_options;
+  Session* raw = s.get();
+  reader_options.interrupt = [raw] { return raw->stop.load(); };
+  auto reader = MvReader::Open(std::make_unique<UploadByteSource>(s->upload), reader_options);
+  if (!reader.ok()) return end(reader.status());
+  const StreamInfo& info = (*reader)->info();
+
+  Intrinsics k;
+  v1::PipelineOptions popts;
+  {
+    std::lock_guard<std::mutex> lock(s->mu);
+    const v1::Intrinsics& pk = s->proto.intrinsics();
+    if ((pk.width_px() != 0 && pk.width_px() != info.width_px) ||
+        (pk.height_px() != 0 && pk.height_px() != info.height_px)) {
+      s->TransitionLocked(v1::Session::FAILED,
+                          InvalidArgumentError(
+                              "intrinsics are for " + std::to_string(pk.width_px()) + "x" +
+                              std::to_string(pk.height_px()) + " but the stream is " +
+                              std::to_string(info.width_px) + "x" + std::to_string(info.height_px)),
+                          "");
+      return;
+    }
+    k.fx_px = pk.fx_px();
+    k.fy_px = pk.fy_px();
+    k.cx_px = pk.cx_px();
+    k.cy_px = pk.cy_px();
+    k.width_px = info.width_px;
+    k.height_px = info.height_px;
+    popts = s->proto.pipeline_options();
+  }
+  Pipeline pipeline(k, info.mv_sigma_px(), ToPipelineOptions(popts));
+
+  const Clock::time_point start = Clock::now();
+  std::set<int> live_planes;  // track ids the filter held after the previous step
+  int64_t frames = 0, pairs = 0, tracked = 0;
+  FrameRecord frame;
+  Status status;
+  while ((status = (*reader)->Next(&frame)).ok()) {
+    ++frames;
+    auto step = pipeline.Push(frame);
+    if (!step.ok()) return end(step.status());
+    const double wall_s = std::chrono::duration<double>(Clock::now() - start).count();
+    std::vector<v1::SessionEvent> events;
+    {
+      std::lock_guard<std::mutex> lock(s->mu);
+      v1::SessionStats* st = s->proto.mutable_stats();
+      st->set_frames(frames);
+      st->set_fps(wall_s >= 0.25 ? frames / wall_s : 0.0);  // no figure from a blip
+      st->set_lag_ms(std::max(0.0, wall_s - frame.timestamp_s) * 1e3);
+      st->set_stream_time_s(frame.timestamp_s);
+      if (step->has_value()) {
+        const PipelineStep& ps = **step;
+        ++pairs;
+        tracked += ps.tracking;
+        st->set_anchor_pairs(pairs);
+        st->set_tracked_pairs(tracked);
+        st->set_planes(static_cast<int>(pipeline.plane_map().size()));
+        *s->proto.mutable_update_time() = TimeUtil::GetCurrentTime();
+
+        // Snapshots: a newly fixed scale rescales everything seen so far.
+        const auto& traj = pipeline.trajectory();
+        if (pipeline.metric() != s->metric) {
+          s->metric = pipeline.metric();
+          s->trajectory.clear();
+          s->planes.clear();
+          for (const auto& [id, mp] : pipeline.plane_map()) s->planes[id] = ToPlane(mp);
+        }
+        for (size_t i = s->trajectory.size(); i < traj.size(); ++i) {
+          v1::Trajectory::Point p;
+          p.set_anchor_index(traj[i].index);
+          p.set_timestamp_s(traj[i].timestamp_s);
+          SetPose(traj[i].world_from_cam, p.mutable_world_from_cam());
+          s->trajectory.push_back(std::move(p));
+        }
+
+        v1::SessionEvent pose;
+        v1::PoseUpdate* pu = pose.mutable_pose();
+        pu->set_anchor_index(ps.later_index);
+        pu->set_timestamp_s(ps.timestamp_s);
+        SetPose(ps.world_from_cam, pu->mutable_world_from_cam());
+        pu->set_tracking(ps.tracking);
+        pu->set_metric(ps.metric);
+        pu->set_note(ps.note);
+        events.push_back(std::move(pose));
+
+        std::set<int> now;
+        for (const PlaneTrack& t : ps.planes) now.insert(t.track_id);
+        auto plane_event = [&](int id, v1::PlaneEvent::Kind kind) {
+          auto it = pipeline.plane_map().find(id);
+          if (it == pipeline.plane_map().end()) return;
+          s->planes[id] = ToPlane(it->second);
+          v1::SessionEvent e;
+          v1::PlaneEvent* pe = e.mutable_plane();
+          pe->set_kind(kind);
+          pe->set_track_id(id);
+          SetVec(it->second.normal_world, pe->mutable_normal_world());
+          pe->set_distance(it->second.distance_m);
+          pe->set_anchor_index(ps.later_index);
+          events.push_back(std::move(e));
+        };
+        for (int id : now) {
+          plane_event(id, live_planes.count(id) ? v1::PlaneEvent::UPDATED : v1::PlaneEvent::ADDED);
+        }
+        for (int id : live_planes) {
+          if (!now.count(id)) plane_event(id, v1::PlaneEvent::REMOVED);
+        }
+        live_planes = std::move(now);
+      }
+    }
+    for (auto& e : events) s->events->Append(std::move(e));
+  }
+  end(status);
+}
+
+}  // namespace slapse::server

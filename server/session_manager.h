@@ -1,0 +1,100 @@
+// SessionManager: the sessions of a server, one pipeline each, run on a
+// bounded pool of worker threads.
+//
+// A session is active while CREATED or RUNNING; at most `max_sessions` are
+// active at once and each holds one worker thread for its whole life (stream
+// reads block), so the pool never oversubscribes. Finished sessions keep their
+// results until deleted.
+//
+// Thread-safety: every public method may be called from any thread.
+#pragma once
+
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "core/common/status.h"
+#include "server/event_log.h"
+#include "server/upload_queue.h"
+#include "slapse/v1/slapse.pb.h"
+
+namespace slapse::server {
+
+struct SessionManagerOptions {
+  // Sessions active (CREATED or RUNNING) at once; also the worker threads.
+  int max_sessions = 4;
+  // Bytes one upload may send in total; 0 = no limit.
+  int64_t max_upload_bytes = int64_t{4} << 30;
+  // Bytes buffered between an upload and its pipeline (backpressure beyond).
+  int64_t upload_buffer_bytes = 4 << 20;
+  // Events kept per session for watchers to resume from.
+  size_t event_ring_capacity = 4096;
+};
+
+class SessionManager {
+ public:
+  explicit SessionManager(SessionManagerOptions options);
+  // Stops every session and joins the workers (as Shutdown()).
+  ~SessionManager();
+  SessionManager(const SessionManager&) = delete;
+  SessionManager& operator=(const SessionManager&) = delete;
+
+  // Validates and starts a session from `request` (source, intrinsics,
+  // pipeline options). INVALID_ARGUMENT, UNIMPLEMENTED (non-upload sources),
+  // RESOURCE_EXHAUSTED (at capacity) or UNAVAILABLE (shutting down).
+  StatusOr<v1::Session> Create(const v1::Session& request);
+  StatusOr<v1::Session> Get(const std::string& name) const;
+  // Sessions in creation order from `page_token`; see ListSessionsRequest.
+  StatusOr<v1::ListSessionsResponse> List(const v1::ListSessionsRequest& request) const;
+  Status Delete(const std::string& name);
+  StatusOr<v1::Session> Stop(const std::string& name);
+
+  // Feeds one upload session. `next` fills the next chunk and returns false at
+  // the end of the client's stream; `cancelled` reports a cancelled rpc.
+  // The first chunk's name has been read by the caller.
+  StatusOr<v1::Session> Upload(const std::string& name, std::string first_bytes,
+                               const std::function<bool(std::string*)>& next,
+                               const std::function<bool()>& cancelled);
+
+  // A session's event log, for a watcher to read (EventLog::Read). The log
+  // outlives a Delete of its session, so a watcher still drains to the final
+  // StateChange. NOT_FOUND if unknown.
+  StatusOr<std::shared_ptr<EventLog>> Events(const std::string& name) const;
+
+  StatusOr<v1::Trajectory> GetTrajectory(const std::string& name) const;
+  StatusOr<v1::PlaneMap> GetPlaneMap(const std::string& name) const;
+
+  // Refuses new sessions, stops the active ones (they end STOPPED, their
+  // watchers end) and joins the workers. Idempotent.
+  void Shutdown();
+
+ private:
+  struct Session;
+
+  // INVALID_ARGUMENT for a malformed name, NOT_FOUND for an unknown one.
+  StatusOr<std::shared_ptr<Session>> Find(const std::string& name) const;
+  void WorkerLoop();
+  void RunSession(const std::shared_ptr<Session>& session);
+  int ActiveCountLocked() const;
+  // Stops a session (sets its flag, closes its upload, marks it STOPPED).
+  static void StopSession(Session* session, const std::string& why);
+
+  const SessionManagerOptions options_;
+  mutable std::mutex mu_;
+  std::condition_variable work_ready_;
+  std::map<uint64_t, std::shared_ptr<Session>> sessions_;  // by id = creation order
+  std::deque<std::shared_ptr<Session>> queue_;             // waiting for a worker
+  std::vector<std::thread> workers_;
+  uint64_t next_id_ = 1;
+  bool shutting_down_ = false;
+};
+
+}  // namespace slapse::server

@@ -1,0 +1,366 @@
+// The slapse service end to end: a real server on 127.0.0.1 (ephemeral port)
+// in-process, the real client library, streams made by the real encoders.
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <grpcpp/create_channel.h>
+#include <grpcpp/generic/generic_stub.h>
+#include <grpcpp/security/credentials.h>
+#include <grpcpp/support/byte_buffer.h>
+
+#include "client/lib/client.h"
+#include "core/common/intrinsics_io.h"
+#include "core/sim/simulate.h"
+#include "server/server.h"
+#include "server/upload_queue.h"
+#include "tests/test_streams.h"
+
+namespace slapse {
+namespace {
+
+using client::ClientOptions;
+using client::SlapseClient;
+using server::ServerOptions;
+using server::SlapseServer;
+
+// Every rpc of these tests has a deadline; a hang fails, it does not block ctest.
+ClientOptions TestClientOptions() {
+  ClientOptions o;
+  o.rpc_timeout_s = 5;
+  o.upload_timeout_s = 20;
+  o.watch_timeout_s = 25;
+  o.upload_chunk_bytes = 32 << 10;
+  return o;
+}
+
+StatusOr<std::unique_ptr<SlapseServer>> StartServer(int max_sessions, size_t ring = 4096) {
+  ServerOptions o;
+  o.address = "127.0.0.1";
+  o.port = 0;
+  o.sessions.max_sessions = max_sessions;
+  o.sessions.event_ring_capacity = ring;
+  o.sessions.upload_buffer_bytes = 256 << 10;  // small: the upload feels backpressure
+  o.shutdown_grace_s = 1;
+  return SlapseServer::Start(o);
+}
+
+class ServerTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = new std::string(testing::MakeTempDir("server_test"));
+    SimulateOptions sim;
+    sim.seed = 3;
+    sim.duration_s = 2.0;
+    sim.width_px = 320;
+    sim.height_px = 240;
+    sim.supersampling = 1;
+    sim.encoder.codec = VideoCodec::kMpeg2;
+    sim.output_dir = *dir_ + "/drive";
+    SimulateReport report;
+    Status s = SimulateDrive(sim, &report);
+    ASSERT_TRUE(s.ok()) << s.ToString();
+    drive_ = new std::string(testing::ReadFileBytes(report.video_path));
+    auto k = ReadIntrinsicsJson(sim.output_dir + "/intrinsics.json");
+    ASSERT_TRUE(k.ok()) << k.status().ToString();
+    intrinsics_ = new Intrinsics(*k);
+  }
+  static void TearDownTestSuite() {
+    delete dir_;
+    delete drive_;
+    delete intrinsics_;
+  }
+
+  void SetUp() override {
+    ASSERT_NE(drive_, nullptr);
+    auto server = StartServer(3);
+    ASSERT_TRUE(server.ok()) << server.status().ToString();
+    server_ = std::move(*server);
+    client_ =
+        SlapseClient::Connect("127.0.0.1:" + std::to_string(server_->port()), TestClientOptions());
+  }
+  void TearDown() override {
+    if (server_) server_->Shutdown();
+  }
+
+  static v1::Session UploadRequest() {
+    v1::Session s;
+    s.mutable_upload();
+    v1::Intrinsics* k = s.mutable_intrinsics();
+    k->set_fx_px(intrinsics_->fx_px);
+    k->set_fy_px(intrinsics_->fy_px);
+    k->set_cx_px(intrinsics_->cx_px);
+    k->set_cy_px(intrinsics_->cy_px);
+    return s;
+  }
+
+  // Watches `name` after `after` to the end; returns the events.
+  std::vector<v1::SessionEvent> WatchAll(const std::string& name, uint64_t after, Status* end) {
+    std::vector<v1::SessionEvent> events;
+    *end = client_->Watch(name, after, [&](const v1::SessionEvent& e) {
+      events.push_back(e);
+      return true;
+    });
+    return events;
+  }
+
+  static std::string* dir_;
+  static std::string* drive_;
+  static Intrinsics* intrinsics_;
+  std::unique_ptr<SlapseServer> server_;
+  std::unique_ptr<SlapseClient> client_;
+};
+
+std::string* ServerTest::dir_ = nullptr;
+std::string* ServerTest::drive_ = nullptr;
+Intrinsics* ServerTest::intrinsics_ = nullptr;
+
+TEST_F(ServerTest, UploadAndWatchToTheEndThenResume) {
+  auto created = client_->CreateSession(UploadRequest());
+  ASSERT_TRUE(created.ok()) << created.status().ToString();
+  const std::string name = created->name();
+  EXPECT_EQ(created->state(), v1::Session::CREATED);
+
+  // Watch live while the upload runs.
+  std::vector<v1::SessionEvent> events;
+  Status watch_end;
+  std::thread watcher([&] { events = WatchAll(name, 0, &watch_end); });
+  auto uploaded = client_->UploadBytes(name, *drive_);
+  watcher.join();
+  ASSERT_TRUE(uploaded.ok()) << uploaded.status().ToString();
+  ASSERT_TRUE(watch_end.ok()) << watch_end.ToString();
+
+  ASSERT_GE(events.size(), 3u);
+  int poses = 0;
+  for (size_t i = 0; i < events.size(); ++i) {
+    EXPECT_EQ(events[i].sequence(), i + 1) << "sequences are 1, 2, 3, ...";
+    if (events[i].has_pose()) {
+      ++poses;
+      EXPECT_EQ(events[i].pose().sequence(), events[i].sequence());
+    }
+  }
+  EXPECT_GT(poses, 5);
+  EXPECT_EQ(events.front().state_change().state(), v1::Session::CREATED);
+  ASSERT_TRUE(events.back().has_state_change());
+  EXPECT_EQ(events.back().state_change().state(), v1::Session::FINISHED);
+
+  auto got = client_->GetSession(name);
+  ASSERT_TRUE(got.ok()) << got.status().ToString();
+  EXPECT_EQ(got->state(), v1::Session::FINISHED);
+  EXPECT_EQ(got->stats().frames(), 60);
+  EXPECT_EQ(got->stats().anchor_pairs(), poses);
+  EXPECT_GT(got->stats().fps(), 0);
+  EXPECT_EQ(got->last_sequence(), events.size());
+
+  // Resume from the middle: exactly the rest, nothing lost or repeated.
+  const uint64_t middle = events.size() / 2;
+  Status resume_end;
+  std::vector<v1::SessionEvent> rest = WatchAll(name, middle, &resume_end);
+  ASSERT_TRUE(resume_end.ok()) << resume_end.ToString();
+  ASSERT_EQ(rest.size(), events.size() - middle);
+  for (size_t i = 0; i < rest.size(); ++i) {
+    EXPECT_EQ(rest[i].SerializeAsString(), events[middle + i].SerializeAsString());
+  }
+
+  auto traj = client_->GetTrajectory(name);
+  ASSERT_TRUE(traj.ok()) << traj.status().ToString();
+  EXPECT_EQ(traj->last_sequence(), events.size());
+  auto list = client_->ListSessions(0, "", v1::Session::FINISHED);
+  ASSERT_TRUE(list.ok()) << list.status().ToString();
+  ASSERT_EQ(list->sessions_size(), 1);
+  EXPECT_EQ(list->sessions(0).name(), name);
+}
+
+TEST_F(ServerTest, UnknownSessionIsNotFound) {
+  EXPECT_EQ(client_->GetSession("sessions/12345").status().code(), StatusCode::kNotFound);
+  EXPECT_EQ(client_->DeleteSession("sessions/12345").code(), StatusCode::kNotFound);
+  EXPECT_EQ(client_->UploadBytes("sessions/12345", "abc").status().code(), StatusCode::kNotFound);
+  Status end;
+  WatchAll("sessions/12345", 0, &end);
+  EXPECT_EQ(end.code(), StatusCode::kNotFound);
+  EXPECT_EQ(client_->GetSession("nonsense").status().code(), StatusCode::kInvalidArgument);
+}
+
+TEST_F(ServerTest, BadIntrinsicsAreInvalidArgument) {
+  v1::Session request = UploadRequest();
+  request.mutable_intrinsics()->set_fx_px(-1);
+  auto created = client_->CreateSession(request);
+  EXPECT_EQ(created.status().code(), StatusCode::kInvalidArgument);
+  request = UploadRequest();
+  request.mutable_rtsp_pull()->set_url("rtsp://camera/1");
+  EXPECT_EQ(client_->CreateSession(request).status().code(), StatusCode::kUnimplemented);
+}
+
+TEST_F(ServerTest, HevcUploadFailsWithFailedPreconditionAndServerKeepsServing) {
+  const std::string hevc = *dir_ + "/x.mkv";
+  ASSERT_EQ(testing::RunCommand("ffmpeg -nostdin -loglevel error -y -f lavfi -i "
+                                "testsrc=size=160x120:rate=10 -frames:v 5 -c:v libx265 "
+                                "-x265-params log-level=error " +
+                                hevc),
+            0);
+  auto created = client_->CreateSession(UploadRequest());
+  ASSERT_TRUE(created.ok()) << created.status().ToString();
+  auto uploaded = client_->UploadBytes(created->name(), testing::ReadFileBytes(hevc));
+  // The upload either completes before the session fails or reports its error.
+  if (!uploaded.ok()) {
+    EXPECT_EQ(uploaded.status().code(), StatusCode::kFailedPrecondition);
+  }
+  Status end;
+  std::vector<v1::SessionEvent> events = WatchAll(created->name(), 0, &end);
+  ASSERT_TRUE(end.ok()) << end.ToString();
+  ASSERT_FALSE(events.empty());
+  EXPECT_EQ(events.back().state_change().state(), v1::Session::FAILED);
+  auto got = client_->GetSession(created->name());
+  ASSERT_TRUE(got.ok()) << got.status().ToString();
+  EXPECT_EQ(got->state(), v1::Session::FAILED);
+  EXPECT_EQ(got->error().code(), static_cast<int>(StatusCode::kFailedPrecondition));
+  EXPECT_NE(got->error().message().find("hevc"), std::string::npos) << got->error().message();
+
+  // Another session on the same server still runs to the end.
+  auto next = client_->CreateSession(UploadRequest());
+  ASSERT_TRUE(next.ok()) << next.status().ToString();
+  ASSERT_TRUE(client_->UploadBytes(next->name(), *drive_).ok());
+  WatchAll(next->name(), 0, &end);
+  ASSERT_TRUE(end.ok()) << end.ToString();
+  auto done = client_->GetSession(next->name());
+  ASSERT_TRUE(done.ok());
+  EXPECT_EQ(done->state(), v1::Session::FINISHED);
+}
+
+TEST_F(ServerTest, OverCapacityIsResourceExhausted) {
+  auto small = StartServer(1);
+  ASSERT_TRUE(small.ok()) << small.status().ToString();
+  auto c =
+      SlapseClient::Connect("127.0.0.1:" + std::to_string((*small)->port()), TestClientOptions());
+  auto first = c->CreateSession(UploadRequest());
+  ASSERT_TRUE(first.ok()) << first.status().ToString();
+  auto second = c->CreateSession(UploadRequest());
+  EXPECT_EQ(second.status().code(), StatusCode::kResourceExhausted);
+  EXPECT_NE(second.status().message().find("capacity"), std::string::npos);
+  // Stopping the first frees its slot.
+  auto stopped = c->StopSession(first->name());
+  ASSERT_TRUE(stopped.ok()) << stopped.status().ToString();
+  EXPECT_EQ(stopped->state(), v1::Session::STOPPED);
+  EXPECT_TRUE(c->CreateSession(UploadRequest()).ok());
+  // Graceful shutdown with a session waiting for its upload does not hang.
+  (*small)->Shutdown();
+}
+
+TEST_F(ServerTest, CursorOlderThanTheRingIsOutOfRange) {
+  auto small = StartServer(1, /*ring=*/4);
+  ASSERT_TRUE(small.ok()) << small.status().ToString();
+  auto c =
+      SlapseClient::Connect("127.0.0.1:" + std::to_string((*small)->port()), TestClientOptions());
+  auto created = c->CreateSession(UploadRequest());
+  ASSERT_TRUE(created.ok());
+  ASSERT_TRUE(c->UploadBytes(created->name(), *drive_).ok());
+  // Wait (bounded) for the end, then ask for the very first events.
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+  v1::Session s;
+  do {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    auto got = c->GetSession(created->name());
+    ASSERT_TRUE(got.ok());
+    s = *got;
+  } while (s.state() == v1::Session::RUNNING && std::chrono::steady_clock::now() < deadline);
+  ASSERT_EQ(s.state(), v1::Session::FINISHED);
+  std::vector<v1::SessionEvent> events;
+  Status end = c->Watch(created->name(), 0, [&](const v1::SessionEvent& e) {
+    events.push_back(e);
+    return true;
+  });
+  EXPECT_EQ(end.code(), StatusCode::kOutOfRange);
+  EXPECT_NE(end.message().find("snapshot"), std::string::npos) << end.message();
+  // The last events are still there.
+  end = c->Watch(created->name(), s.last_sequence() - 2, [&](const v1::SessionEvent& e) {
+    events.push_back(e);
+    return true;
+  });
+  EXPECT_TRUE(end.ok()) << end.ToString();
+  EXPECT_EQ(events.size(), 2u);
+}
+
+// grpc.health.v1.Health/Check without generated stubs: an empty request (all
+// services) answers HealthCheckResponse{status: SERVING} = bytes 08 01.
+TEST_F(ServerTest, HealthCheckAnswersServing) {
+  auto channel = grpc::CreateChannel("127.0.0.1:" + std::to_string(server_->port()),
+                                     grpc::InsecureChannelCredentials());
+  grpc::GenericStub stub(channel);
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(5));
+  grpc::CompletionQueue cq;
+  grpc::ByteBuffer request, response;
+  grpc::Slice empty("");
+  request = grpc::ByteBuffer(&empty, 1);
+  auto call = stub.PrepareUnaryCall(&context, "/grpc.health.v1.Health/Check", request, &cq);
+  call->StartCall();
+  grpc::Status status;
+  call->Finish(&response, &status, reinterpret_cast<void*>(1));
+  void* tag = nullptr;
+  bool ok = false;
+  ASSERT_TRUE(cq.Next(&tag, &ok));
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  std::vector<grpc::Slice> slices;
+  ASSERT_TRUE(response.Dump(&slices).ok());
+  std::string bytes;
+  for (const grpc::Slice& sl : slices)
+    bytes.append(reinterpret_cast<const char*>(sl.begin()), sl.size());
+  EXPECT_EQ(bytes, std::string("\x08\x01", 2));
+  cq.Shutdown();
+  while (cq.Next(&tag, &ok)) {
+  }
+}
+
+TEST_F(ServerTest, ShutdownEndsWatchersWithStopped) {
+  auto small = StartServer(1);
+  ASSERT_TRUE(small.ok()) << small.status().ToString();
+  auto c =
+      SlapseClient::Connect("127.0.0.1:" + std::to_string((*small)->port()), TestClientOptions());
+  auto created = c->CreateSession(UploadRequest());
+  ASSERT_TRUE(created.ok()) << created.status().ToString();
+  std::vector<v1::SessionEvent> events;
+  Status end;
+  std::thread watcher([&] {
+    end = c->Watch(created->name(), 0, [&](const v1::SessionEvent& e) {
+      events.push_back(e);
+      return true;
+    });
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  (*small)->Shutdown();
+  watcher.join();
+  EXPECT_TRUE(end.ok()) << end.ToString();
+  ASSERT_FALSE(events.empty());
+  EXPECT_EQ(events.back().state_change().state(), v1::Session::STOPPED);
+}
+
+TEST(UploadQueueTest, BlocksTheWriterWhenFullAndLimitsTheTotal) {
+  server::UploadQueueOptions o;
+  o.capacity_bytes = 10;
+  o.max_total_bytes = 30;
+  server::UploadQueue q(o);
+  ASSERT_TRUE(q.Write("12345678", nullptr).ok());
+  std::atomic<bool> second_done{false};
+  std::thread writer([&] {
+    EXPECT_TRUE(q.Write("abcdefgh", nullptr).ok());
+    second_done = true;
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(150));
+  EXPECT_FALSE(second_done) << "a full buffer holds the writer";
+  uint8_t buf[64];
+  EXPECT_EQ(q.Read(buf, 64), 8);
+  writer.join();
+  EXPECT_TRUE(second_done);
+  EXPECT_EQ(q.Read(buf, 64), 8);
+  Status over = q.Write(std::string(20, 'x'), nullptr);
+  EXPECT_EQ(over.code(), StatusCode::kResourceExhausted);
+  EXPECT_EQ(q.Read(buf, 64), -1) << "the reader fails too";
+}
+
+}  // namespace
+}  // namespace slapse
