@@ -43,23 +43,18 @@ TEST(EkfSimTest, TracksADriveFromTrueCorrespondences) {
   est.push_back({0, 0.0, world_from_cam});
   for (int k = gap; k < static_cast<int>(gt->frames.size()); k += gap) {
     const Rigid3d& wl = gt->frames[k].world_from_cam;
-    const Rigid3d earlier_from_world = gt->frames[k - gap].world_from_cam.Inverse();
     std::map<int, PlaneObservation> obs;
     std::map<int, std::vector<int>> mbs;
     for (int mb = 0; mb < gt->mb_cols * gt->mb_rows; ++mb) {
       const int label = gt->frames[k].mb_labels[mb];
       if (label < 0 || gt->planes[label].kind == PlaneKind::kBackground) continue;
       const Eigen::Vector2d x(16 * (mb % gt->mb_cols) + 7.5, 16 * (mb / gt->mb_cols) + 7.5);
-      const GtPlane& p = gt->planes[label];
-      const Eigen::Vector3d ray = wl.rotation * K.Unproject(x);
-      const double s =
-          (p.distance_m - p.normal_world.dot(wl.translation)) / p.normal_world.dot(ray);
-      const Eigen::Vector3d x_e = earlier_from_world * (wl.translation + s * ray);
-      if (s <= 0 || x_e.z() < 0.5) continue;
+      Eigen::Vector2d x_e;
+      if (!gt->TransferThroughPlane(label, k, k - gap, x, &x_e)) continue;
       PlaneObservation& o = obs[label];
       o.track_id = label;
       o.x_later_px.push_back(x);
-      o.x_earlier_px.push_back(K.Project(x_e) + Eigen::Vector2d(noise(rng), noise(rng)));
+      o.x_earlier_px.push_back(x_e + Eigen::Vector2d(noise(rng), noise(rng)));
       o.variance_px2.push_back(0.0625);
       mbs[label].push_back(mb);
     }

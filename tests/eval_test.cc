@@ -80,18 +80,12 @@ TEST(EvalTest, TrueHomographyMapsSimulatedPlanePointsAndTheDriveScores) {
   // Every labelled block: H_true maps its centre where the true poses put it.
   int checked = 0;
   const int later = 20, earlier = 16;
-  const Rigid3d& wl = gt->frames[later].world_from_cam;
   for (int mb = 0; mb < gt->mb_cols * gt->mb_rows; ++mb) {
     const int label = gt->frames[later].mb_labels[mb];
     if (label < 0) continue;
     const Eigen::Vector2d x(16 * (mb % gt->mb_cols) + 7.5, 16 * (mb / gt->mb_cols) + 7.5);
-    const GtPlane& p = gt->planes[label];
-    const Eigen::Vector3d ray = wl.rotation * gt->intrinsics.Unproject(x);
-    const double s = (p.distance_m - p.normal_world.dot(wl.translation)) / p.normal_world.dot(ray);
-    const Eigen::Vector3d x_e =
-        gt->frames[earlier].world_from_cam.Inverse() * (wl.translation + s * ray);
-    if (x_e.z() < 0.5) continue;
-    const Eigen::Vector2d expected = gt->intrinsics.Project(x_e);
+    Eigen::Vector2d expected;
+    if (!gt->TransferThroughPlane(label, later, earlier, x, &expected)) continue;
     const Eigen::Matrix3d H = TrueHomography(*gt, label, earlier, later);
     EXPECT_LT(((H * x.homogeneous()).hnormalized() - expected).norm(), 1e-6);
     ++checked;

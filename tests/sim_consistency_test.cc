@@ -17,24 +17,6 @@
 namespace slapse {
 namespace {
 
-// Where the content of later-frame pixel x sits in frame `ref`, by the ground
-// truth: ray through x -> the plane -> project into `ref`.
-bool PredictDisplacement(const GroundTruth& gt, int frame, int ref, int plane_id,
-                         const Eigen::Vector2d& x, double plane_shift_m, Eigen::Vector2d* disp) {
-  const GtPlane& plane = gt.planes[plane_id];
-  const Rigid3d& world_from_cam = gt.frames[frame].world_from_cam;
-  const Eigen::Vector3d ray = world_from_cam.rotation * gt.intrinsics.Unproject(x);
-  const Eigen::Vector3d c = world_from_cam.translation;
-  const double denom = plane.normal_world.dot(ray);
-  if (std::abs(denom) < 1e-9) return false;
-  const double s = (plane.distance_m + plane_shift_m - plane.normal_world.dot(c)) / denom;
-  if (s <= 0) return false;
-  const Eigen::Vector3d x_ref = gt.frames[ref].world_from_cam.Inverse() * (c + s * ray);
-  if (x_ref.z() <= 0.1) return false;
-  *disp = gt.intrinsics.Project(x_ref) - x;
-  return true;
-}
-
 // Luma standard deviation of the 16x16 block around (x, y): texture measure.
 double BlockStd(const FrameRecord& f, int width, double x, double y) {
   const int x0 = static_cast<int>(std::lround(x - 7.5)),
@@ -69,6 +51,7 @@ Agreement Measure(const std::vector<FrameRecord>& frames, GroundTruth gt, int wi
                   const Perturbation& perturb, bool b_frames_only, int kind_filter = -1) {
   gt.intrinsics.fx_px *= perturb.focal_scale;
   gt.intrinsics.fy_px *= perturb.focal_scale;
+  for (GtPlane& p : gt.planes) p.distance_m += perturb.plane_shift_m;
   std::vector<double> errors;
   const int n = static_cast<int>(gt.frames.size());
   for (const FrameRecord& f : frames) {
@@ -85,12 +68,11 @@ Agreement Measure(const std::vector<FrameRecord>& frames, GroundTruth gt, int wi
       if (kind_filter >= 0 && static_cast<int>(gt.planes[label].kind) != kind_filter) continue;
       if (BlockStd(f, width, mv.x_px, mv.y_px) < 12) continue;  // untextured
       const int ref_gt = std::clamp(ref + perturb.ref_offset, 0, n - 1);
-      Eigen::Vector2d disp;
-      if (!PredictDisplacement(gt, cur, ref_gt, label, {mv.x_px, mv.y_px}, perturb.plane_shift_m,
-                               &disp)) {
-        continue;
-      }
-      errors.push_back((Eigen::Vector2d(mv.dx_px, mv.dy_px) - disp).norm());
+      // Where the block's content sits in the reference frame, by the truth.
+      const Eigen::Vector2d x(mv.x_px, mv.y_px);
+      Eigen::Vector2d x_ref;
+      if (!gt.TransferThroughPlane(label, cur, ref_gt, x, &x_ref)) continue;
+      errors.push_back((Eigen::Vector2d(mv.dx_px, mv.dy_px) - (x_ref - x)).norm());
     }
   }
   Agreement a;

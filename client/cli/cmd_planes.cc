@@ -21,21 +21,6 @@
 namespace slapse::cli {
 namespace {
 
-// Intrinsics from --intrinsics, else the simulator's intrinsics.json beside the input.
-StatusOr<Intrinsics> IntrinsicsFor(const Flags& flags, const std::string& input, int w, int h) {
-  std::string spec = flags.GetString("intrinsics");
-  if (spec.empty()) {
-    const auto beside = std::filesystem::path(input).parent_path() / "intrinsics.json";
-    if (!std::filesystem::exists(beside)) {
-      return InvalidArgumentError(
-          "--intrinsics is required (FILE.json, 'fx,fy,cx,cy' or 'hfov=DEG'): no "
-          "intrinsics.json beside the input");
-    }
-    spec = beside.string();
-  }
-  return ParseIntrinsicsSpec(spec, w, h);
-}
-
 StatusOr<std::vector<double>> ParseList(const std::string& text, const std::string& name) {
   std::vector<double> out;
   std::stringstream ss(text);
@@ -83,7 +68,8 @@ int RunPlanes(int argc, char** argv) {
   auto reader = MvReader::Open(input, ro);
   if (!reader.ok()) return Fail("planes", reader.status().ToString());
   const StreamInfo& info = (*reader)->info();
-  auto intrinsics = IntrinsicsFor(flags, input, info.width_px, info.height_px);
+  auto intrinsics =
+      IntrinsicsFor(flags.GetString("intrinsics"), input, info.width_px, info.height_px);
   if (!intrinsics.ok()) return Fail("planes", intrinsics.status().message(), 2);
 
   SegmentMerger merger(info.width_px, info.height_px, info.mv_sigma_px());

@@ -129,15 +129,8 @@ int RunRun(int argc, char** argv) {
   auto reader = MvReader::Open(input);
   if (!reader.ok()) return Fail("run", reader.status().ToString());
   const StreamInfo& info = (*reader)->info();
-  std::string spec = flags.GetString("intrinsics");
-  if (spec.empty()) {
-    const auto beside = std::filesystem::path(input).parent_path() / "intrinsics.json";
-    if (!std::filesystem::exists(beside)) {
-      return Fail("run", "--intrinsics is required: no intrinsics.json beside " + input, 2);
-    }
-    spec = beside.string();
-  }
-  auto intrinsics = ParseIntrinsicsSpec(spec, info.width_px, info.height_px);
+  auto intrinsics =
+      IntrinsicsFor(flags.GetString("intrinsics"), input, info.width_px, info.height_px);
   if (!intrinsics.ok()) return Fail("run", intrinsics.status().message(), 2);
   const std::string out_dir = flags.GetString("out");
   std::error_code ec;

@@ -1,8 +1,11 @@
 #include "client/cli/flags.h"
 
+#include "core/common/intrinsics_io.h"
+
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
+#include <filesystem>
 #include <sstream>
 
 namespace slapse::cli {
@@ -101,6 +104,19 @@ StatusOr<double> Flags::GetDouble(const std::string& name, double min, double ma
     return InvalidArgumentError(os.str());
   }
   return v;
+}
+
+StatusOr<Intrinsics> IntrinsicsFor(const std::string& spec, const std::string& input, int width_px,
+                                   int height_px) {
+  if (!spec.empty()) return ParseIntrinsicsSpec(spec, width_px, height_px);
+  const auto beside = std::filesystem::path(input).parent_path() / "intrinsics.json";
+  if (!std::filesystem::exists(beside)) {
+    return InvalidArgumentError(
+        "--intrinsics is required (FILE.json, 'fx,fy,cx,cy' or 'hfov=DEG'): no intrinsics.json "
+        "beside " +
+        input);
+  }
+  return ParseIntrinsicsSpec(beside.string(), width_px, height_px);
 }
 
 }  // namespace slapse::cli

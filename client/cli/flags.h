@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "core/common/camera.h"
 #include "core/common/status.h"
 
 namespace slapse::cli {
@@ -45,5 +46,11 @@ class Flags {
   std::vector<std::string> positional_;
   bool help_ = false;
 };
+
+// Intrinsics for a width x height stream from an --intrinsics spec
+// (ParseIntrinsicsSpec), or, when `spec` is empty, from the simulator's
+// intrinsics.json beside `input`.
+StatusOr<Intrinsics> IntrinsicsFor(const std::string& spec, const std::string& input, int width_px,
+                                   int height_px);
 
 }  // namespace slapse::cli

@@ -27,6 +27,29 @@ const char* PlaneKindName(PlaneKind kind) {
   return "unknown";
 }
 
+bool GroundTruth::TransferThroughPlane(int plane_id, int frame, int other,
+                                       const Eigen::Vector2d& x_px,
+                                       Eigen::Vector2d* x_other_px) const {
+  const int n = static_cast<int>(frames.size());
+  if (plane_id < 0 || plane_id >= static_cast<int>(planes.size()) || frame < 0 || frame >= n ||
+      other < 0 || other >= n) {
+    return false;
+  }
+  const GtPlane& p = planes[plane_id];
+  const Rigid3d& world_from_cam = frames[frame].world_from_cam;
+  const Eigen::Vector3d ray = world_from_cam.rotation * intrinsics.Unproject(x_px);
+  const double denom = p.normal_world.dot(ray);
+  if (std::abs(denom) < 1e-12) return false;
+  // Ray parameter s with z = 1 rays: s is the depth in the camera of `frame`.
+  const double s = (p.distance_m - p.normal_world.dot(world_from_cam.translation)) / denom;
+  if (s < 0.1) return false;
+  const Eigen::Vector3d x_other =
+      frames[other].world_from_cam.Inverse() * (world_from_cam.translation + s * ray);
+  if (x_other.z() < 0.1) return false;
+  *x_other_px = intrinsics.Project(x_other);
+  return true;
+}
+
 int GroundTruth::LabelAt(int frame, double x_px, double y_px) const {
   if (frame < 0 || frame >= static_cast<int>(frames.size())) return kMbMixed;
   // Pixel centres are at integers, so macroblock column c covers x in [16c - 0.5, 16c + 15.5).

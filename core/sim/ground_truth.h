@@ -54,6 +54,13 @@ struct GroundTruth {
 
   // Label of the macroblock containing pixel (x, y) in frame `frame`.
   int LabelAt(int frame, double x_px, double y_px) const;
+
+  // Where pixel x of frame `frame`, taken to lie on plane `plane_id`, appears
+  // in frame `other`, by the true poses and plane: the ray through x meets the
+  // plane, the point is projected into `other`. False when the ray misses the
+  // plane or the point is behind either camera (closer than 0.1 m).
+  bool TransferThroughPlane(int plane_id, int frame, int other, const Eigen::Vector2d& x_px,
+                            Eigen::Vector2d* x_other_px) const;
 };
 
 Status SaveGroundTruth(const GroundTruth& gt, const std::string& dir);
