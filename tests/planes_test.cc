@@ -240,7 +240,11 @@ TEST(ThresholdInfinityTest, ForwardMotionKeepsNearAndDropsFar) {
   SceneNoise noise;
   noise.seed = 2;
   const SyntheticPair s = MakePair(Frame0(), Frame1(), 0, noise);
-  const auto result = ThresholdInfinity(s.pair.correspondences, TestIntrinsics(), {});
+  // The paper's tau_inf = 1 px (the default is stricter): "near" below means
+  // true parallax >= 2 px, which must survive a 1 px threshold.
+  InfinityOptions options;
+  options.tau_inf_px = 1.0;
+  const auto result = ThresholdInfinity(s.pair.correspondences, TestIntrinsics(), options);
   ASSERT_TRUE(result.ok()) << result.status().ToString();
   ASSERT_TRUE(result->has_motion);
   EXPECT_EQ(result->rotation_source, InfinityRotationSource::kEssential);
@@ -445,10 +449,16 @@ TEST(PlaneExtractorTest, DegenerateInputGivesNoPlane) {
   result = extractor.Process(s.pair, few_road);
   ASSERT_TRUE(result.ok());
   EXPECT_TRUE(result->planes.empty());
-  // One more makes a plane.
+  // One more makes a plane -- without the spatial connectivity split: these
+  // 20 MBs are scattered over the road (every 12th), which the default split
+  // (only a connected component counts) would reject; the count rule itself
+  // is what is tested here.
   few_road.push_back(road[12 * 19]);
-  extractor.Reset();
-  result = extractor.Process(s.pair, few_road);
+  PlaneExtractionOptions unsplit;
+  unsplit.connectivity_radius_mbs = 0;
+  unsplit.min_mb_neighbours = 0;
+  PlaneExtractor scattered(unsplit);
+  result = scattered.Process(s.pair, few_road);
   ASSERT_TRUE(result.ok());
   ASSERT_EQ(result->planes.size(), 1u);
   EXPECT_EQ(result->planes[0].mb_indices.size(), 20u);
@@ -660,6 +670,149 @@ TEST(PlaneExtractorTest, TakenOverTrackIsLostNotHijacked) {
   int band_2_mbs = 0;                        // (a few wrong MVs fit band 2 by chance)
   for (int i : plane_of_band[2]->correspondence_indices) band_2_mbs += s2.label[i] == 2;
   EXPECT_GE(band_2_mbs, 387);  // 13 columns = 390 MBs; noise beyond 1 px is rare
+}
+
+// Noise-free correspondences on MB cells `cells` (row-major indices of the
+// 40x30 grid) that move with homography H: x_earlier = dehom(H x_later).
+void AddPatch(const Eigen::Matrix3d& H, const std::vector<int>& cells, AnchorPair* pair) {
+  for (int cell : cells) {
+    Correspondence c;
+    c.x_later_px = Eigen::Vector2d(16.0 * (cell % kCols) + 7.5, 16.0 * (cell / kCols) + 7.5);
+    c.x_earlier_px = (H * c.x_later_px.homogeneous()).hnormalized();
+    c.mb_index = cell;
+    c.variance_px2 = 0.01;
+    c.n_direct = 1;
+    pair->correspondences.push_back(c);
+  }
+}
+
+// Cells of the rectangle [c0, c1] x [r0, r1] (inclusive).
+std::vector<int> Rect(int c0, int c1, int r0, int r1) {
+  std::vector<int> cells;
+  for (int r = r0; r <= r1; ++r) {
+    for (int c = c0; c <= c1; ++c) cells.push_back(r * kCols + c);
+  }
+  return cells;
+}
+
+AnchorPair EmptyGridPair() {
+  AnchorPair pair;
+  pair.earlier_index = 0;
+  pair.later_index = 1;
+  pair.mb_cols = kCols;
+  pair.mb_rows = kRows;
+  return pair;
+}
+
+std::vector<int> AllIndices(const AnchorPair& pair) {
+  std::vector<int> all(pair.correspondences.size());
+  for (size_t i = 0; i < all.size(); ++i) all[i] = static_cast<int>(i);
+  return all;
+}
+
+Eigen::Matrix3d ExampleHomography(double shift_px) {
+  Eigen::Matrix3d H;
+  H << 1.02, 0.01, shift_px, -0.01, 0.98, 3.0, 2e-5, 1e-5, 1.0;
+  return H;
+}
+
+TEST(PlaneExtractorTest, ConnectivitySplitsDisjointPatchesOfOneHomography) {
+  // Two patches that move with the same homography, 14 MB columns apart: a
+  // 12x5 patch (60 MBs) and an 8x4 patch (32 MBs).
+  AnchorPair pair = EmptyGridPair();
+  const std::vector<int> big = Rect(22, 33, 18, 22), small = Rect(2, 9, 18, 21);
+  AddPatch(ExampleHomography(5.0), big, &pair);
+  AddPatch(ExampleHomography(5.0), small, &pair);
+  const std::vector<int> all = AllIndices(pair);
+
+  // Default: each patch is a plane of its own, the bigger one first.
+  PlaneExtractor split(PlaneExtractionOptions{});
+  auto result = split.Process(pair, all);
+  ASSERT_TRUE(result.ok());
+  ASSERT_EQ(result->planes.size(), 2u);
+  std::vector<int> big_sorted = big, small_sorted = small;
+  std::sort(big_sorted.begin(), big_sorted.end());
+  std::sort(small_sorted.begin(), small_sorted.end());
+  EXPECT_EQ(result->planes[0].mb_indices, big_sorted);
+  EXPECT_EQ(result->planes[1].mb_indices, small_sorted);
+  EXPECT_TRUE(result->unassigned_indices.empty());
+  for (const ExtractedPlane& p : result->planes) {
+    EXPECT_LT(
+        (p.H_earlier_from_later / p.H_earlier_from_later(2, 2) - ExampleHomography(5.0)).norm(),
+        1e-6);
+  }
+
+  // Without the split (the paper's sequential RANSAC): one plane over both.
+  PlaneExtractionOptions unsplit;
+  unsplit.connectivity_radius_mbs = 0;
+  unsplit.min_mb_neighbours = 0;
+  PlaneExtractor joint(unsplit);
+  result = joint.Process(pair, all);
+  ASSERT_TRUE(result.ok());
+  ASSERT_EQ(result->planes.size(), 1u);
+  EXPECT_EQ(result->planes[0].mb_indices.size(), big.size() + small.size());
+}
+
+TEST(PlaneExtractorTest, PeelsIsolatedBlocksAndSpurs) {
+  // A 6x5 patch, a one-block spur touching its corner diagonally, and an
+  // isolated block two cells away: all on one homography.
+  AnchorPair pair = EmptyGridPair();
+  const std::vector<int> patch = Rect(10, 15, 10, 14);
+  const int spur = 15 * kCols + 16;      // diagonal to the corner (15, 14)
+  const int isolated = 12 * kCols + 18;  // two columns right of the patch
+  AddPatch(ExampleHomography(-4.0), patch, &pair);
+  AddPatch(ExampleHomography(-4.0), {spur, isolated}, &pair);
+  const std::vector<int> all = AllIndices(pair);
+  std::vector<int> patch_sorted = patch;
+  std::sort(patch_sorted.begin(), patch_sorted.end());
+
+  PlaneExtractor peeling(PlaneExtractionOptions{});  // min_mb_neighbours = 2
+  auto result = peeling.Process(pair, all);
+  ASSERT_TRUE(result.ok());
+  ASSERT_EQ(result->planes.size(), 1u);
+  EXPECT_EQ(result->planes[0].mb_indices, patch_sorted);
+  EXPECT_EQ(result->unassigned_indices.size(), 2u);
+
+  // No peeling: the diagonal spur is 8-connected and joins; the isolated block does not.
+  PlaneExtractionOptions no_peel;
+  no_peel.min_mb_neighbours = 0;
+  PlaneExtractor plain(no_peel);
+  result = plain.Process(pair, all);
+  ASSERT_TRUE(result.ok());
+  ASSERT_EQ(result->planes.size(), 1u);
+  EXPECT_EQ(result->planes[0].mb_indices.size(), patch.size() + 1);
+  EXPECT_TRUE(std::binary_search(result->planes[0].mb_indices.begin(),
+                                 result->planes[0].mb_indices.end(), spur));
+}
+
+TEST(PlaneExtractorTest, ScatteredBestModelIsSetAsideForACompactPlane) {
+  // 48 scattered blocks (every other row and column) on homography A beat a
+  // compact 6x4 patch (24 MBs) on homography B in support, but no two of them
+  // touch, so A is no plane; B must still be found.
+  AnchorPair pair = EmptyGridPair();
+  std::vector<int> scattered;
+  for (int r = 0; r < 12; r += 2) {
+    for (int c = 0; c < 16; c += 2) scattered.push_back(r * kCols + c);
+  }
+  const std::vector<int> compact = Rect(25, 30, 20, 23);
+  AddPatch(ExampleHomography(8.0), scattered, &pair);
+  AddPatch(ExampleHomography(-8.0), compact, &pair);
+  const std::vector<int> all = AllIndices(pair);
+
+  PlaneExtractor extractor(PlaneExtractionOptions{});
+  auto result = extractor.Process(pair, all);
+  ASSERT_TRUE(result.ok());
+  ASSERT_EQ(result->planes.size(), 1u);
+  EXPECT_EQ(result->planes[0].mb_indices.size(), compact.size());
+  EXPECT_EQ(result->unassigned_indices.size(), scattered.size());  // set aside, reported
+
+  PlaneExtractionOptions give_up;
+  give_up.max_failed_discoveries = 0;
+  PlaneExtractor stopping(give_up);
+  result = stopping.Process(pair, all);
+  ASSERT_TRUE(result.ok());
+  EXPECT_TRUE(result->planes.empty());
+  EXPECT_EQ(result->unassigned_indices, all);
 }
 
 }  // namespace

@@ -30,6 +30,98 @@ int MbCellOf(const Eigen::Vector2d& p, int mb_cols, int mb_rows) {
   return static_cast<int>(row) * mb_cols + static_cast<int>(col);
 }
 
+// The points of `mask` (one entry per point, point j in MB cell mb_of[j]) whose
+// cells form the largest connected component of the mask's cells. Two cells
+// are neighbours when their column and row differ by at most `radius`; a path
+// may also step through up to `max_gap` consecutive cells marked in `empty`
+// (cells without any motion vector, which say nothing about the surface).
+// Largest by point count; ties go to the component found first (lowest cell
+// index). radius <= 0: the mask unchanged.
+std::vector<char> LargestComponent(const std::vector<int>& mb_of, const std::vector<char>& mask,
+                                   int mb_cols, int mb_rows, int radius,
+                                   const std::vector<char>& empty, int max_gap) {
+  if (radius <= 0) return mask;
+  const int num_cells = mb_cols * mb_rows;
+  std::vector<int> points_in_cell(num_cells, 0);
+  for (size_t j = 0; j < mask.size(); ++j) {
+    if (mask[j]) ++points_in_cell[mb_of[j]];
+  }
+  std::vector<int> component(num_cells, -1);
+  // Empty cells: the shortest gap they were reached with, per component.
+  std::vector<int> gap(num_cells, 0), gap_component(num_cells, -1);
+  std::vector<int> stack;
+  int best_component = -1, best_size = 0, num_components = 0;
+  for (int start = 0; start < num_cells; ++start) {
+    if (points_in_cell[start] == 0 || component[start] >= 0) continue;
+    const int id = num_components++;
+    int size = 0;
+    component[start] = id;
+    stack.assign(1, start);
+    while (!stack.empty()) {
+      const int cell = stack.back();
+      stack.pop_back();
+      const bool is_gap = points_in_cell[cell] == 0;
+      const int cell_gap = is_gap ? gap[cell] : 0;
+      if (!is_gap) size += points_in_cell[cell];
+      const int c0 = cell % mb_cols, r0 = cell / mb_cols;
+      for (int r = std::max(0, r0 - radius); r <= std::min(mb_rows - 1, r0 + radius); ++r) {
+        for (int c = std::max(0, c0 - radius); c <= std::min(mb_cols - 1, c0 + radius); ++c) {
+          const int next = r * mb_cols + c;
+          if (points_in_cell[next] > 0) {
+            if (component[next] >= 0) continue;
+            component[next] = id;
+            stack.push_back(next);
+          } else if (empty[next] && cell_gap < max_gap &&
+                     (gap_component[next] != id || gap[next] > cell_gap + 1)) {
+            gap_component[next] = id;
+            gap[next] = cell_gap + 1;
+            stack.push_back(next);
+          }
+        }
+      }
+    }
+    if (size > best_size) {
+      best_size = size;
+      best_component = id;
+    }
+  }
+  std::vector<char> kept(mask.size(), 0);
+  for (size_t j = 0; j < mask.size(); ++j) {
+    kept[j] = mask[j] && component[mb_of[j]] == best_component ? 1 : 0;
+  }
+  return kept;
+}
+
+// `mask` without the points whose MB cell has fewer than `min_neighbours` of
+// its 8 neighbour cells in the mask (one simultaneous pass): drops isolated
+// blocks and one-block-wide spurs, which are mostly blocks straddling an edge
+// or stray MVs that happen to fit. min_neighbours <= 0: the mask unchanged.
+std::vector<char> PeelSparseCells(const std::vector<int>& mb_of, const std::vector<char>& mask,
+                                  int mb_cols, int mb_rows, int min_neighbours) {
+  if (min_neighbours <= 0) return mask;
+  std::vector<char> in_set(mb_cols * mb_rows, 0);
+  for (size_t j = 0; j < mask.size(); ++j) {
+    if (mask[j]) in_set[mb_of[j]] = 1;
+  }
+  std::vector<char> kept(mask.size(), 0);
+  for (size_t j = 0; j < mask.size(); ++j) {
+    if (!mask[j]) continue;
+    const int c0 = mb_of[j] % mb_cols, r0 = mb_of[j] / mb_cols;
+    int neighbours = 0;
+    for (int r = std::max(0, r0 - 1); r <= std::min(mb_rows - 1, r0 + 1); ++r) {
+      for (int c = std::max(0, c0 - 1); c <= std::min(mb_cols - 1, c0 + 1); ++c) {
+        if ((r != r0 || c != c0) && in_set[r * mb_cols + c]) ++neighbours;
+      }
+    }
+    kept[j] = neighbours >= min_neighbours ? 1 : 0;
+  }
+  return kept;
+}
+
+int CountSet(const std::vector<char>& mask) {
+  return static_cast<int>(std::count(mask.begin(), mask.end(), 1));
+}
+
 }  // namespace
 
 PlaneExtractor::PlaneExtractor(PlaneExtractionOptions options) : options_(std::move(options)) {}
@@ -74,25 +166,76 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
   uint64_t ransac_call = 0;
 
   std::vector<Eigen::Vector2d> x_later, x_earlier;  // of `remaining`
+  std::vector<int> mb_of;                           // of `remaining`
   // Runs RANSAC over `remaining` (local indices in `subset`).
   auto run_ransac = [&](const std::vector<int>* subset) {
     x_later.resize(remaining.size());
     x_earlier.resize(remaining.size());
+    mb_of.resize(remaining.size());
     for (size_t j = 0; j < remaining.size(); ++j) {
       x_later[j] = corr[remaining[j]].x_later_px;
       x_earlier[j] = corr[remaining[j]].x_earlier_px;
+      mb_of[j] = corr[remaining[j]].mb_index;
     }
     ransac_options.seed = MixSeed(options_.seed, ransac_call++);
     return Ransac<HomographyEstimator>(ransac_options).Estimate(x_later, x_earlier, subset);
   };
-  // Builds the plane from a successful report over `remaining`.
-  auto make_plane = [&](const RansacReport<Eigen::Matrix3d>& report, int track_id, bool tracked) {
+  // A plane hypothesis over `remaining`: its homography and inlier mask.
+  struct Consensus {
+    Eigen::Matrix3d H;
+    std::vector<char> mask;
+  };
+  const double max_sq_error = options_.eps_h_px * options_.eps_h_px;
+  std::vector<char> empty_cells(num_mbs, 1);  // MB cells without any correspondence
+  for (const Correspondence& c : corr) {
+    if (c.mb_index >= 0 && c.mb_index < num_mbs) empty_cells[c.mb_index] = 0;
+  }
+  auto largest_component = [&](const std::vector<char>& mask) {
+    const std::vector<char> peeled =
+        PeelSparseCells(mb_of, mask, pair.mb_cols, pair.mb_rows, options_.min_mb_neighbours);
+    return LargestComponent(mb_of, peeled, pair.mb_cols, pair.mb_rows,
+                            options_.connectivity_radius_mbs, empty_cells,
+                            options_.max_empty_gap_mbs);
+  };
+  // Connectivity split and least-squares refits of a successful report (over
+  // the `remaining` of the last run_ransac call).
+  auto post_process = [&](const RansacReport<Eigen::Matrix3d>& report) {
+    Consensus best{report.model, largest_component(report.inlier_mask)};
+    int best_count = CountSet(best.mask);
+    std::vector<Eigen::Vector2d> fit_later, fit_earlier;
+    std::vector<Eigen::Matrix3d> models;
+    std::vector<double> sq_residuals;
+    for (int iter = 0; iter < options_.refit_iterations; ++iter) {
+      fit_later.clear();
+      fit_earlier.clear();
+      for (size_t j = 0; j < best.mask.size(); ++j) {
+        if (!best.mask[j]) continue;
+        fit_later.push_back(x_later[j]);
+        fit_earlier.push_back(x_earlier[j]);
+      }
+      HomographyEstimator::Estimate(fit_later, fit_earlier, &models);
+      if (models.empty()) break;
+      HomographyEstimator::Residuals(x_later, x_earlier, models[0], &sq_residuals);
+      std::vector<char> mask(sq_residuals.size());
+      for (size_t j = 0; j < mask.size(); ++j) mask[j] = sq_residuals[j] <= max_sq_error ? 1 : 0;
+      mask = largest_component(mask);
+      const int count = CountSet(mask);
+      if (count < best_count) break;
+      const bool stable = mask == best.mask;
+      best = {models[0], std::move(mask)};
+      best_count = count;
+      if (stable) break;
+    }
+    return best;
+  };
+  // Builds the plane from a consensus over `remaining`.
+  auto make_plane = [&](const Consensus& consensus, int track_id, bool tracked) {
     ExtractedPlane plane;
     plane.track_id = track_id;
     plane.tracked = tracked;
-    plane.H_earlier_from_later = report.model;
+    plane.H_earlier_from_later = consensus.H;
     for (size_t j = 0; j < remaining.size(); ++j) {
-      if (!report.inlier_mask[j]) continue;
+      if (!consensus.mask[j]) continue;
       plane.correspondence_indices.push_back(remaining[j]);
       plane.mb_indices.push_back(corr[remaining[j]].mb_index);
     }
@@ -101,10 +244,15 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
                            plane.mb_indices.end());
     return plane;
   };
-  auto remove_inliers = [&](const RansacReport<Eigen::Matrix3d>& report) {
+  // Removes the points of `mask` from `remaining` (appending them to `removed` if given).
+  auto remove_points = [&](const std::vector<char>& mask, std::vector<int>* removed) {
     std::vector<int> rest;
     for (size_t j = 0; j < remaining.size(); ++j) {
-      if (!report.inlier_mask[j]) rest.push_back(remaining[j]);
+      if (!mask[j]) {
+        rest.push_back(remaining[j]);
+      } else if (removed != nullptr) {
+        removed->push_back(remaining[j]);
+      }
     }
     remaining.swap(rest);
   };
@@ -133,9 +281,10 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
         ++result.num_tracks_lost;
         continue;
       }
+      const Consensus consensus = post_process(report);
       int subset_inliers = 0;
-      for (int j : subset) subset_inliers += report.inlier_mask[j] ? 1 : 0;
-      ExtractedPlane plane = make_plane(report, track.track_id, /*tracked=*/true);
+      for (int j : subset) subset_inliers += consensus.mask[j] ? 1 : 0;
+      ExtractedPlane plane = make_plane(consensus, track.track_id, /*tracked=*/true);
       plane.track_subset_size = static_cast<int>(subset.size());
       plane.track_subset_inliers = subset_inliers;
       if (static_cast<int>(plane.mb_indices.size()) < min_mbs ||
@@ -144,22 +293,40 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
         continue;
       }
       result.planes.push_back(std::move(plane));
-      remove_inliers(report);
+      remove_points(consensus.mask, nullptr);
     }
   }
 
   // 2. Discovery of new planes.
+  std::vector<int> set_aside;  // inliers of models whose largest component was too small
+  int failed_discoveries = 0;
   while (static_cast<int>(result.planes.size()) < options_.max_planes &&
          static_cast<int>(remaining.size()) >= HomographyEstimator::kMinNumSamples) {
     const RansacReport<Eigen::Matrix3d> report = run_ransac(nullptr);
     if (!report.success) break;
-    ExtractedPlane plane = make_plane(report, next_track_id_, /*tracked=*/false);
-    if (static_cast<int>(plane.mb_indices.size()) < min_mbs) break;
+    const Consensus consensus = post_process(report);
+    ExtractedPlane plane = make_plane(consensus, next_track_id_, /*tracked=*/false);
+    if (static_cast<int>(plane.mb_indices.size()) < min_mbs) {
+      // Too small. Without connectivity the best model is the biggest there
+      // is: stop. With it, the model's inliers may be scattered blocks; set
+      // them aside and look for a compact plane among the rest.
+      if (options_.connectivity_radius_mbs <= 0 || report.support < min_mbs ||
+          failed_discoveries >= options_.max_failed_discoveries) {
+        break;
+      }
+      ++failed_discoveries;
+      remove_points(report.inlier_mask, &set_aside);
+      continue;
+    }
+    failed_discoveries = 0;
     ++next_track_id_;
     result.planes.push_back(std::move(plane));
-    remove_inliers(report);
+    remove_points(consensus.mask, nullptr);
   }
   result.unassigned_indices = remaining;
+  result.unassigned_indices.insert(result.unassigned_indices.end(), set_aside.begin(),
+                                   set_aside.end());
+  std::sort(result.unassigned_indices.begin(), result.unassigned_indices.end());
 
   // 3. Remember the planes' MB cells in this pair's later anchor.
   tracks_.clear();
