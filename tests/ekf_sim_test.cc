@@ -85,13 +85,14 @@ TEST(EkfSimTest, TracksADriveFromTrueCorrespondences) {
       "eps_n %.2f deg\n",
       terr->distance_m, 100 * terr->eps_D, terr->ate_rmse_m, terr->rpe_trans_rmse_m,
       terr->rpe_rot_rmse_deg, perr->planes_evaluated, perr->eps_d_m, perr->eps_n_deg);
-  // Measured (seed 2, 35.6 m): eps_D 0.48 %, ATE 0.016 m, eps_d 0.14 m,
-  // eps_n 0.39 deg. Bounds at 2-4x those, far below what a lost scale or a
-  // wrong transition produces (tens of per cent, metres).
+  // Measured (seed 2, 35.6 m, default EkfOptions): eps_D 0.19 %, ATE
+  // 0.006 m, eps_d 0.03 m, eps_n 0.13 deg over 4 planes. Bounds sit well
+  // above, yet far below what a lost scale or a wrong transition produces
+  // (a 2 % error in the plane transition gave eps_D 11 %, eps_d 2.3 m).
   EXPECT_GT(terr->distance_m, 25.0);
   EXPECT_LT(terr->eps_D, 0.015);
   EXPECT_LT(terr->ate_rmse_m, 0.1);
-  EXPECT_GE(perr->planes_evaluated, 4);
+  EXPECT_GE(perr->planes_evaluated, 3);
   EXPECT_LT(perr->eps_d_m, 0.3);
   EXPECT_LT(perr->eps_n_deg, 1.5);
 }
