@@ -47,7 +47,7 @@ int RunPlanes(int argc, char** argv) {
        {"png", "FILE", "picture to write", "planes.png"},
        {"eps-h", "PX", "homography inlier threshold", "1"},
        {"tau-inf", "PX", "plane-at-infinity parallax threshold",
-                std::to_string(static_cast<int>(InfinityOptions{}.tau_inf_px))},
+        std::to_string(static_cast<int>(InfinityOptions{}.tau_inf_px))},
        {"intrinsics", "SPEC",
         "FILE.json, 'fx,fy,cx,cy' or 'hfov=DEG' (default: intrinsics.json beside INPUT)", ""}});
   if (Status s = flags.Parse(argc, argv); !s.ok()) return Fail("planes", s.message(), 2);

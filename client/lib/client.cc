@@ -40,38 +40,38 @@ StatusOr<Response> Result(const grpc::Status& s, Response response) {
 
 }  // namespace
 
-StatusOr<v1::Session> SlapseClient::CreateSession(const v1::Session& session) {
+template <typename Request, typename Response, typename Method>
+StatusOr<Response> SlapseClient::Unary(Method method, const Request& request) {
   grpc::ClientContext context;
   SetDeadline(&context, options_.rpc_timeout_s);
-  v1::CreateSessionRequest request;
-  *request.mutable_session() = session;
-  v1::Session response;
-  grpc::Status s = stub_->CreateSession(&context, request, &response);
+  Response response;
+  const grpc::Status s = ((*stub_).*method)(&context, request, &response);
   return Result(s, std::move(response));
 }
 
+StatusOr<v1::Session> SlapseClient::CreateSession(const v1::Session& session) {
+  v1::CreateSessionRequest request;
+  *request.mutable_session() = session;
+  return Unary<v1::CreateSessionRequest, v1::Session>(
+      &v1::SlapseService::StubInterface::CreateSession, request);
+}
+
 StatusOr<v1::Session> SlapseClient::GetSession(const std::string& name) {
-  grpc::ClientContext context;
-  SetDeadline(&context, options_.rpc_timeout_s);
   v1::GetSessionRequest request;
   request.set_name(name);
-  v1::Session response;
-  grpc::Status s = stub_->GetSession(&context, request, &response);
-  return Result(s, std::move(response));
+  return Unary<v1::GetSessionRequest, v1::Session>(&v1::SlapseService::StubInterface::GetSession,
+                                                   request);
 }
 
 StatusOr<v1::ListSessionsResponse> SlapseClient::ListSessions(int page_size,
                                                               const std::string& page_token,
                                                               v1::Session::State state) {
-  grpc::ClientContext context;
-  SetDeadline(&context, options_.rpc_timeout_s);
   v1::ListSessionsRequest request;
   request.set_page_size(page_size);
   request.set_page_token(page_token);
   request.set_state_filter(state);
-  v1::ListSessionsResponse response;
-  grpc::Status s = stub_->ListSessions(&context, request, &response);
-  return Result(s, std::move(response));
+  return Unary<v1::ListSessionsRequest, v1::ListSessionsResponse>(
+      &v1::SlapseService::StubInterface::ListSessions, request);
 }
 
 Status SlapseClient::DeleteSession(const std::string& name) {
@@ -84,33 +84,24 @@ Status SlapseClient::DeleteSession(const std::string& name) {
 }
 
 StatusOr<v1::Session> SlapseClient::StopSession(const std::string& name) {
-  grpc::ClientContext context;
-  SetDeadline(&context, options_.rpc_timeout_s);
   v1::StopSessionRequest request;
   request.set_name(name);
-  v1::Session response;
-  grpc::Status s = stub_->StopSession(&context, request, &response);
-  return Result(s, std::move(response));
+  return Unary<v1::StopSessionRequest, v1::Session>(&v1::SlapseService::StubInterface::StopSession,
+                                                    request);
 }
 
 StatusOr<v1::Trajectory> SlapseClient::GetTrajectory(const std::string& name) {
-  grpc::ClientContext context;
-  SetDeadline(&context, options_.rpc_timeout_s);
   v1::GetTrajectoryRequest request;
   request.set_name(name);
-  v1::Trajectory response;
-  grpc::Status s = stub_->GetTrajectory(&context, request, &response);
-  return Result(s, std::move(response));
+  return Unary<v1::GetTrajectoryRequest, v1::Trajectory>(
+      &v1::SlapseService::StubInterface::GetTrajectory, request);
 }
 
 StatusOr<v1::PlaneMap> SlapseClient::GetPlaneMap(const std::string& name) {
-  grpc::ClientContext context;
-  SetDeadline(&context, options_.rpc_timeout_s);
   v1::GetPlaneMapRequest request;
   request.set_name(name);
-  v1::PlaneMap response;
-  grpc::Status s = stub_->GetPlaneMap(&context, request, &response);
-  return Result(s, std::move(response));
+  return Unary<v1::GetPlaneMapRequest, v1::PlaneMap>(&v1::SlapseService::StubInterface::GetPlaneMap,
+                                                     request);
 }
 
 StatusOr<v1::Session> SlapseClient::Upload(const std::string& name,

@@ -67,6 +67,9 @@ class SlapseClient {
   StatusOr<v1::Session> Upload(const std::string& name,
                                const std::function<bool(std::string*)>& next_chunk);
   void SetDeadline(grpc::ClientContext* context, double timeout_s) const;
+  // One unary rpc with the client's deadline: (stub->*method)(ctx, request, &response).
+  template <typename Request, typename Response, typename Method>
+  StatusOr<Response> Unary(Method method, const Request& request);
 
   std::shared_ptr<v1::SlapseService::StubInterface> stub_;
   ClientOptions options_;
