@@ -1,6 +1,7 @@
 # slapse in a container: the same install script as the README and CI.
 #   docker build -t slapse .
 #   docker run --rm -v "$PWD/out:/out" slapse simulate --out /out/drive
+#   docker run --rm -p 50051:50051 slapse serve --port 50051     # the gRPC service
 FROM debian:12
 WORKDIR /src
 COPY deploy/install-deps.sh deploy/install-deps.sh
@@ -9,5 +10,6 @@ COPY . .
 RUN bash deploy/build.sh -DSLAPSE_BUILD_TESTS=OFF -DCMAKE_BUILD_TYPE=Release \
  && cmake --install build --prefix /usr/local \
  && rm -rf build
+EXPOSE 50051
 ENTRYPOINT ["slapse"]
 CMD ["--help"]
