@@ -2,7 +2,14 @@
 
 #include <google/protobuf/util/time_util.h>
 
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <cctype>
 #include <cmath>
+#include <cstdlib>
 #include <set>
 
 #include "core/mv/mv_reader.h"
@@ -20,16 +27,104 @@ bool IsTerminal(v1::Session::State s) {
 
 bool Finite(double v) { return std::isfinite(v); }
 
+// Network sources: defaults of RtspPush / RtpSdp start_timeout_ms and
+// receive_timeout_ms (0 in the request), and the largest SDP accepted.
+constexpr int kDefaultStartTimeoutMs = 60000;
+constexpr int kDefaultReceiveTimeoutMs = 5000;
+constexpr size_t kMaxSdpBytes = 64 << 10;
+
+Status ValidateTimeouts(int start_ms, int receive_ms, const std::string& what) {
+  if (start_ms < 0 || receive_ms < 0) {
+    return InvalidArgumentError(what +
+                                ".start_timeout_ms and receive_timeout_ms must be >= 0 "
+                                "(0 = the default)");
+  }
+  return Status::Ok();
+}
+
+Status ValidateRtspPath(const std::string& path) {
+  bool ok = !path.empty() && path.size() <= 256 && path[0] != '/';
+  for (char c : path) {
+    ok = ok && (std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '_' || c == '-' ||
+                c == '/');
+  }
+  if (!ok) {
+    return InvalidArgumentError("rtsp_push.path '" + path +
+                                "' is not a path: 1 to 256 of [A-Za-z0-9._-/], no leading '/'");
+  }
+  return Status::Ok();
+}
+
+// A light syntax check (RFC 4566): "v=0" first, every line "<letter>=...",
+// a c= line and an m=video line with a port. FFmpeg's SDP parser accepts
+// almost anything, so this is what turns a malformed SDP into INVALID_ARGUMENT.
+Status ValidateSdp(const std::string& sdp) {
+  auto bad = [](const std::string& why) { return InvalidArgumentError("rtp_sdp.sdp: " + why); };
+  if (sdp.empty()) return bad("required (the session description text)");
+  if (sdp.size() > kMaxSdpBytes) return bad("longer than 64 KiB");
+  if (sdp.find('\0') != std::string::npos) return bad("contains a NUL byte");
+  bool first = true, has_c = false, has_video = false;
+  size_t pos = 0;
+  while (pos < sdp.size()) {
+    size_t eol = sdp.find('\n', pos);
+    if (eol == std::string::npos) eol = sdp.size();
+    std::string line = sdp.substr(pos, eol - pos);
+    pos = eol + 1;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (line.empty()) continue;
+    if (line.size() < 2 || line[1] != '=' || !std::islower(static_cast<unsigned char>(line[0]))) {
+      return bad("line '" + line.substr(0, 40) + "' is not '<letter>=<value>'");
+    }
+    if (first && line != "v=0") return bad("must start with 'v=0'");
+    first = false;
+    if (line[0] == 'c') has_c = true;
+    if (line.compare(0, 8, "m=video ") == 0) {
+      const long port = std::strtol(line.c_str() + 8, nullptr, 10);
+      if (port < 1 || port > 65535) return bad("m=video line without a port in 1..65535");
+      has_video = true;
+    }
+  }
+  if (!has_c) return bad("no connection line (c=IN IP4 <address>)");
+  if (!has_video) return bad("no video media line (m=video <port> RTP/AVP <type>)");
+  return Status::Ok();
+}
+
+// A free TCP port on `host`, from the kernel's ephemeral range. The port is
+// released before FFmpeg binds it again; the kernel does not hand it out again
+// right away, so the gap is harmless in practice.
+StatusOr<int> PickFreeTcpPort(const std::string& host) {
+  sockaddr_in sa{};
+  sa.sin_family = AF_INET;
+  if (inet_pton(AF_INET, host.c_str(), &sa.sin_addr) != 1) {
+    return UnavailableError("rtsp_push_host '" + host + "' is not an IPv4 address");
+  }
+  const int fd = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  if (fd < 0) return UnavailableError("no socket for an RTSP listener");
+  socklen_t len = sizeof(sa);
+  const bool ok = bind(fd, reinterpret_cast<sockaddr*>(&sa), sizeof(sa)) == 0 &&
+                  getsockname(fd, reinterpret_cast<sockaddr*>(&sa), &len) == 0;
+  close(fd);
+  if (!ok) return UnavailableError("no free port for an RTSP listener on " + host);
+  return static_cast<int>(ntohs(sa.sin_port));
+}
+
 Status ValidateRequest(const v1::Session& r) {
   switch (r.source_case()) {
     case v1::Session::kUpload:
       break;
     case v1::Session::kRtspPull:
-      return UnimplementedError("RTSP pull sources are not served yet; create an upload session");
+      return UnimplementedError(
+          "RTSP pull sources are not served yet; use rtsp_push, rtp_sdp or upload");
     case v1::Session::kRtspPush:
-      return UnimplementedError("RTSP push sources are not served yet; create an upload session");
+      SLAPSE_RETURN_IF_ERROR(ValidateRtspPath(r.rtsp_push().path()));
+      SLAPSE_RETURN_IF_ERROR(ValidateTimeouts(r.rtsp_push().start_timeout_ms(),
+                                              r.rtsp_push().receive_timeout_ms(), "rtsp_push"));
+      break;
     case v1::Session::kRtpSdp:
-      return UnimplementedError("RTP/SDP sources are not served yet; create an upload session");
+      SLAPSE_RETURN_IF_ERROR(ValidateSdp(r.rtp_sdp().sdp()));
+      SLAPSE_RETURN_IF_ERROR(ValidateTimeouts(r.rtp_sdp().start_timeout_ms(),
+                                              r.rtp_sdp().receive_timeout_ms(), "rtp_sdp"));
+      break;
     case v1::Session::SOURCE_NOT_SET:
       return InvalidArgumentError(
           "session.source is required (upload, rtsp_pull, rtsp_push, rtp_sdp)");
@@ -221,6 +316,13 @@ StatusOr<v1::Session> SessionManager::Create(const v1::Session& request) {
     s->proto.set_name(s->name);
     s->proto.clear_stats();
     s->proto.clear_error();
+    s->proto.clear_ingest_url();
+    if (request.has_rtsp_push()) {
+      auto port = PickFreeTcpPort(options_.rtsp_push_host);
+      if (!port.ok()) return port.status();
+      s->proto.set_ingest_url("rtsp://" + options_.rtsp_push_host + ":" + std::to_string(*port) +
+                              "/" + request.rtsp_push().path());
+    }
     s->proto.set_state(v1::Session::STATE_UNSPECIFIED);
     *s->proto.mutable_create_time() = TimeUtil::GetCurrentTime();
     s->Transition(v1::Session::CREATED, Status::Ok(), "created; waiting for the stream");
@@ -429,18 +531,82 @@ void SessionManager::RunSession(const std::shared_ptr<Session>& s) {
     if (s->stop) {
       s->TransitionLocked(v1::Session::STOPPED, Status::Ok(), "stopped");
     } else if (status.code() == StatusCode::kOutOfRange) {
-      s->TransitionLocked(v1::Session::FINISHED, Status::Ok(), "the stream ended");
+      // FFmpeg's RTSP listener reports a TEARDOWN and a closed connection
+      // alike (end of file), so both finish the session.
+      s->TransitionLocked(v1::Session::FINISHED, Status::Ok(),
+                          s->proto.has_rtsp_push()
+                              ? "the publisher ended the stream (TEARDOWN or closed connection)"
+                              : "the stream ended");
     } else {
       s->TransitionLocked(v1::Session::FAILED, status, "");
     }
   };
   if (s->stop) return end(CancelledError("stopped"));
 
-  MvReaderOptions reader_options;
+  // Network sources are bounded by a deadline the interrupt callback checks:
+  // start_timeout_ms from now until the first frame, then receive_timeout_ms
+  // per Next() call (the time spent blocked in I/O, not in the pipeline).
+  v1::Session::SourceCase source;
+  int start_ms = 0, receive_ms = 0;
+  {
+    std::lock_guard<std::mutex> lock(s->mu);
+    source = s->proto.source_case();
+    if (source == v1::Session::kRtspPush) {
+      start_ms = s->proto.rtsp_push().start_timeout_ms();
+      receive_ms = s->proto.rtsp_push().receive_timeout_ms();
+    } else if (source == v1::Session::kRtpSdp) {
+      start_ms = s->proto.rtp_sdp().start_timeout_ms();
+      receive_ms = s->proto.rtp_sdp().receive_timeout_ms();
+    }
+  }
+  if (start_ms == 0) start_ms = kDefaultStartTimeoutMs;
+  if (receive_ms == 0) receive_ms = kDefaultReceiveTimeoutMs;
+  const bool network = source != v1::Session::kUpload;
+  auto now_ns = [] {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch())
+        .count();
+  };
+  std::atomic<int64_t> deadline_ns{now_ns() + int64_t{start_ms} * 1000000};
+  std::atomic<bool> timed_out{false};
+  int64_t frames = 0;
+  // Ends a network session whose deadline passed (the read was interrupted).
+  auto end_timed_out = [&] {
+    std::lock_guard<std::mutex> lock(s->mu);
+    if (s->stop) {
+      s->TransitionLocked(v1::Session::STOPPED, Status::Ok(), "stopped");
+    } else if (frames == 0) {
+      s->TransitionLocked(
+          v1::Session::FAILED,
+          Status(StatusCode::kDeadlineExceeded,
+                 std::string(source == v1::Session::kRtspPush ? "no RTSP publisher sent video"
+                                                              : "no RTP video arrived") +
+                     " within start_timeout_ms=" + std::to_string(start_ms)),
+          "");
+    } else if (source == v1::Session::kRtpSdp) {
+      s->TransitionLocked(v1::Session::FINISHED, Status::Ok(),
+                          "no RTP video for receive_timeout_ms=" + std::to_string(receive_ms) +
+                              ": the stream is taken as ended");
+    } else {
+      s->TransitionLocked(
+          v1::Session::FAILED,
+          UnavailableError("the RTSP publisher sent nothing for receive_timeout_ms=" +
+                           std::to_string(receive_ms)),
+          "");
+    }
+  };
   Session* raw = s.get();
-  reader_options.interrupt = [raw] { return raw->stop.load(); };
-  auto reader = MvReader::Open(std::make_unique<UploadByteSource>(s->upload), reader_options);
-  if (!reader.ok()) return end(reader.status());
+  auto reader = OpenReader(s, [raw, network, &deadline_ns, &timed_out, now_ns] {
+    if (raw->stop.load()) return true;
+    if (network && now_ns() > deadline_ns.load()) {
+      timed_out = true;
+      return true;
+    }
+    return false;
+  });
+  if (!reader.ok()) {
+    if (timed_out) return end_timed_out();
+    return end(reader.status());
+  }
   const StreamInfo& info = (*reader)->info();
 
   Intrinsics k;
@@ -470,11 +636,16 @@ void SessionManager::RunSession(const std::shared_ptr<Session>& s) {
 
   const Clock::time_point start = Clock::now();
   std::set<int> live_planes;  // track ids the filter held after the previous step
-  int64_t frames = 0, pairs = 0, tracked = 0;
+  int64_t pairs = 0, tracked = 0;
   FrameRecord frame;
   Status status;
-  while ((status = (*reader)->Next(&frame)).ok()) {
-    ++frames;
+  for (;;) {
+    if (frames > 0) deadline_ns = now_ns() + int64_t{receive_ms} * 1000000;
+    status = (*reader)->Next(&frame);
+    if (!status.ok()) break;
+    if (++frames == 1 && network) {
+      s->Transition(v1::Session::RUNNING, Status::Ok(), "receiving the stream");
+    }
     auto step = pipeline.Push(frame);
     if (!step.ok()) return end(step.status());
     const double wall_s = std::chrono::duration<double>(Clock::now() - start).count();
@@ -547,7 +718,57 @@ void SessionManager::RunSession(const std::shared_ptr<Session>& s) {
     }
     for (auto& e : events) s->events->Append(std::move(e));
   }
+  if (timed_out && status.code() == StatusCode::kCancelled) return end_timed_out();
   end(status);
+}
+
+StatusOr<std::unique_ptr<MvReader>> SessionManager::OpenReader(const std::shared_ptr<Session>& s,
+                                                               std::function<bool()> interrupt) {
+  MvReaderOptions o;
+  o.interrupt = std::move(interrupt);
+  const v1::Session req = s->Snapshot();
+  switch (req.source_case()) {
+    case v1::Session::kRtspPush: {
+      // FFmpeg's RTSP demuxer in listen mode: accepts one publisher, answers
+      // its ANNOUNCE / SETUP / RECORD, then reads its RTP (TCP interleaved
+      // or UDP). "timeout" is FFmpeg's socket I/O timeout in microseconds.
+      const int receive_ms = req.rtsp_push().receive_timeout_ms() > 0
+                                 ? req.rtsp_push().receive_timeout_ms()
+                                 : kDefaultReceiveTimeoutMs;
+      o.format = "rtsp";
+      o.format_options = {{"rtsp_flags", "listen"},
+                          {"timeout", std::to_string(int64_t{receive_ms} * 1000)}};
+      return MvReader::Open(req.ingest_url(), o);
+    }
+    case v1::Session::kRtpSdp: {
+      // The SDP goes to a private temp file (mkstemp: mode 0600) that is
+      // removed once FFmpeg has parsed it; only file, udp and rtp are allowed.
+      const char* tmp = std::getenv("TMPDIR");
+      std::string path =
+          std::string(tmp != nullptr && *tmp != '\0' ? tmp : "/tmp") + "/slapse-sdp-XXXXXX";
+      const int fd = mkstemp(path.data());
+      if (fd < 0) return UnavailableError("cannot create a temp file for the SDP");
+      const std::string& sdp = req.rtp_sdp().sdp();
+      size_t done = 0;
+      while (done < sdp.size()) {
+        const ssize_t n = write(fd, sdp.data() + done, sdp.size() - done);
+        if (n <= 0) break;
+        done += static_cast<size_t>(n);
+      }
+      close(fd);
+      if (done != sdp.size()) {
+        unlink(path.c_str());
+        return UnavailableError("cannot write the SDP to a temp file");
+      }
+      o.format = "sdp";
+      o.format_options = {{"protocol_whitelist", "file,udp,rtp"}, {"allowed_media_types", "video"}};
+      auto reader = MvReader::Open(path, o);
+      unlink(path.c_str());
+      return reader;
+    }
+    default:
+      return MvReader::Open(std::make_unique<UploadByteSource>(s->upload), o);
+  }
 }
 
 }  // namespace slapse::server

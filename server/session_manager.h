@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "core/common/status.h"
+#include "core/mv/mv_reader.h"
 #include "server/event_log.h"
 #include "server/upload_queue.h"
 #include "slapse/v1/slapse.pb.h"
@@ -37,6 +38,9 @@ struct SessionManagerOptions {
   int64_t upload_buffer_bytes = 4 << 20;
   // Events kept per session for watchers to resume from.
   size_t event_ring_capacity = 4096;
+  // RTSP push: the address each session's RTSP listener binds (on a free
+  // ephemeral port of its own) and that its ingest_url names.
+  std::string rtsp_push_host = "127.0.0.1";
 };
 
 class SessionManager {
@@ -48,8 +52,9 @@ class SessionManager {
   SessionManager& operator=(const SessionManager&) = delete;
 
   // Validates and starts a session from `request` (source, intrinsics,
-  // pipeline options). INVALID_ARGUMENT, UNIMPLEMENTED (non-upload sources),
-  // RESOURCE_EXHAUSTED (at capacity) or UNAVAILABLE (shutting down).
+  // pipeline options). INVALID_ARGUMENT (also a bad RTSP push path or SDP),
+  // UNIMPLEMENTED (RTSP pull), RESOURCE_EXHAUSTED (at capacity) or
+  // UNAVAILABLE (shutting down, or no free port for an RTSP listener).
   StatusOr<v1::Session> Create(const v1::Session& request);
   StatusOr<v1::Session> Get(const std::string& name) const;
   // Sessions in creation order from `page_token`; see ListSessionsRequest.
@@ -83,6 +88,9 @@ class SessionManager {
   StatusOr<std::shared_ptr<Session>> Find(const std::string& name) const;
   void WorkerLoop();
   void RunSession(const std::shared_ptr<Session>& session);
+  // Opens the session's reader for its source; `interrupt` aborts blocking I/O.
+  StatusOr<std::unique_ptr<MvReader>> OpenReader(const std::shared_ptr<Session>& session,
+                                                 std::function<bool()> interrupt);
   int ActiveCountLocked() const;
   // Stops a session (sets its flag, closes its upload, marks it STOPPED).
   static void StopSession(Session* session, const std::string& why);

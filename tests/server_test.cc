@@ -1,10 +1,19 @@
 // The slapse service end to end: a real server on 127.0.0.1 (ephemeral port)
 // in-process, the real client library, streams made by the real encoders.
+#include <fcntl.h>
 #include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <signal.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <atomic>
 #include <chrono>
+#include <cstdio>
+#include <fstream>
 #include <memory>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -39,6 +48,126 @@ ClientOptions TestClientOptions() {
   return o;
 }
 
+// A child `ffmpeg` (the camera) run with -nostdin -loglevel error. The
+// destructor kills (SIGKILL) and reaps it, so no test path leaks a process.
+class FfmpegProcess {
+ public:
+  explicit FfmpegProcess(const std::vector<std::string>& args) {
+    std::vector<std::string> argv = {"ffmpeg", "-nostdin", "-loglevel", "error"};
+    argv.insert(argv.end(), args.begin(), args.end());
+    std::vector<char*> c;
+    for (std::string& a : argv) c.push_back(a.data());
+    c.push_back(nullptr);
+    pid_ = fork();
+    if (pid_ == 0) {
+      const int null_fd = open("/dev/null", O_RDWR);
+      dup2(null_fd, 0);
+      dup2(null_fd, 1);  // the rtp muxer prints its SDP on stdout
+      execvp("ffmpeg", c.data());
+      _exit(127);
+    }
+  }
+  ~FfmpegProcess() { Kill(); }
+  FfmpegProcess(const FfmpegProcess&) = delete;
+  FfmpegProcess& operator=(const FfmpegProcess&) = delete;
+
+  bool started() const { return pid_ > 0; }
+  // The exit code once it exits within `timeout`; -1 if it is still running
+  // (or died by a signal).
+  int Wait(std::chrono::milliseconds timeout) {
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    while (pid_ > 0) {
+      int status = 0;
+      if (waitpid(pid_, &status, WNOHANG) == pid_) {
+        pid_ = -1;
+        return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+      }
+      if (std::chrono::steady_clock::now() > deadline) return -1;
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    return -1;
+  }
+  // Freezes the process (SIGSTOP): its connections stay open, nothing is sent.
+  void Freeze() {
+    if (pid_ > 0) kill(pid_, SIGSTOP);
+  }
+  void Kill() {
+    if (pid_ <= 0) return;
+    kill(pid_, SIGKILL);
+    waitpid(pid_, nullptr, 0);
+    pid_ = -1;
+  }
+
+ private:
+  pid_t pid_ = -1;
+};
+
+// True once a local socket of `kind` ("tcp" in LISTEN, or "udp") has `port`,
+// read from /proc/net (no connection attempt, which would use up the RTSP
+// listener's single accept). Polls until `timeout`.
+bool WaitForLocalPort(const std::string& kind, int port, std::chrono::milliseconds timeout) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  char want[8];
+  std::snprintf(want, sizeof(want), ":%04X", port);
+  while (std::chrono::steady_clock::now() < deadline) {
+    {
+      const char* file = "/proc/net/";
+      for (const std::string suffix : {"", "6"}) {
+        std::ifstream in(std::string(file) + kind + suffix);
+        std::string line;
+        std::getline(in, line);  // header
+        while (std::getline(in, line)) {
+          std::istringstream fields(line);
+          std::string slot, local, remote, state;
+          fields >> slot >> local >> remote >> state;
+          const bool port_ok = local.size() >= 5 && local.compare(local.size() - 5, 5, want) == 0;
+          if (port_ok && (kind != "tcp" || state == "0A")) return true;
+        }
+      }
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  return false;
+}
+
+// An even UDP port p with p and p + 1 free (RTP and RTCP), or 0.
+int FreeRtpPort() {
+  auto bind_udp = [](int port) {
+    const int fd = socket(AF_INET, SOCK_DGRAM, 0);
+    sockaddr_in sa{};
+    sa.sin_family = AF_INET;
+    sa.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    sa.sin_port = htons(static_cast<uint16_t>(port));
+    socklen_t len = sizeof(sa);
+    int got = -1;
+    if (bind(fd, reinterpret_cast<sockaddr*>(&sa), sizeof(sa)) == 0 &&
+        getsockname(fd, reinterpret_cast<sockaddr*>(&sa), &len) == 0) {
+      got = ntohs(sa.sin_port);
+    }
+    return std::make_pair(fd, got);
+  };
+  for (int attempt = 0; attempt < 20; ++attempt) {
+    auto [probe, any] = bind_udp(0);
+    close(probe);
+    if (any <= 0) continue;
+    const int even = any & ~1;
+    auto [a, pa] = bind_udp(even);
+    auto [b, pb] = bind_udp(even + 1);
+    close(a);
+    close(b);
+    if (pa == even && pb == even + 1) return even;
+  }
+  return 0;
+}
+
+// The SDP `ffmpeg -f rtp -sdp_file` writes for MPEG-2 video (static payload
+// type 32) sent to 127.0.0.1:port.
+std::string Mpeg2RtpSdp(int port) {
+  return "v=0\r\no=- 0 0 IN IP4 127.0.0.1\r\ns=No Name\r\nc=IN IP4 127.0.0.1\r\nt=0 0\r\n"
+         "m=video " +
+         std::to_string(port) + " RTP/AVP 32\r\n";
+}
+
 StatusOr<std::unique_ptr<SlapseServer>> StartServer(int max_sessions, size_t ring = 4096) {
   ServerOptions o;
   o.address = "127.0.0.1";
@@ -66,6 +195,7 @@ class ServerTest : public ::testing::Test {
     Status s = SimulateDrive(sim, &report);
     ASSERT_TRUE(s.ok()) << s.ToString();
     drive_ = new std::string(testing::ReadFileBytes(report.video_path));
+    drive_path_ = new std::string(report.video_path);
     auto k = ReadIntrinsicsJson(sim.output_dir + "/intrinsics.json");
     ASSERT_TRUE(k.ok()) << k.status().ToString();
     intrinsics_ = new Intrinsics(*k);
@@ -73,6 +203,7 @@ class ServerTest : public ::testing::Test {
   static void TearDownTestSuite() {
     delete dir_;
     delete drive_;
+    delete drive_path_;
     delete intrinsics_;
   }
 
@@ -111,6 +242,7 @@ class ServerTest : public ::testing::Test {
 
   static std::string* dir_;
   static std::string* drive_;
+  static std::string* drive_path_;
   static Intrinsics* intrinsics_;
   std::unique_ptr<SlapseServer> server_;
   std::unique_ptr<SlapseClient> client_;
@@ -118,6 +250,7 @@ class ServerTest : public ::testing::Test {
 
 std::string* ServerTest::dir_ = nullptr;
 std::string* ServerTest::drive_ = nullptr;
+std::string* ServerTest::drive_path_ = nullptr;
 Intrinsics* ServerTest::intrinsics_ = nullptr;
 
 TEST_F(ServerTest, UploadAndWatchToTheEndThenResume) {
@@ -174,6 +307,195 @@ TEST_F(ServerTest, UploadAndWatchToTheEndThenResume) {
   ASSERT_TRUE(list.ok()) << list.status().ToString();
   ASSERT_EQ(list->sessions_size(), 1);
   EXPECT_EQ(list->sessions(0).name(), name);
+}
+
+int CountPoses(const std::vector<v1::SessionEvent>& events) {
+  int poses = 0;
+  for (const auto& e : events) poses += e.has_pose();
+  return poses;
+}
+
+// The port of "rtsp://host:port/path".
+int PortOf(const std::string& url) {
+  const size_t colon = url.rfind(':');
+  return colon == std::string::npos ? 0 : std::atoi(url.c_str() + colon + 1);
+}
+
+// The camera publishes with ANNOUNCE / RECORD over TCP; TEARDOWN at its end
+// finishes the session.
+TEST_F(ServerTest, RtspPushStreamsPosesToFinished) {
+  v1::Session request = UploadRequest();
+  request.mutable_rtsp_push()->set_path("cam1");
+  request.mutable_rtsp_push()->set_start_timeout_ms(10000);
+  request.mutable_rtsp_push()->set_receive_timeout_ms(3000);
+  auto created = client_->CreateSession(request);
+  ASSERT_TRUE(created.ok()) << created.status().ToString();
+  const std::string url = created->ingest_url();
+  ASSERT_EQ(url.rfind("rtsp://127.0.0.1:", 0), 0u) << url;
+  ASSERT_EQ(url.substr(url.size() - 5), "/cam1") << url;
+  Status watch_end;
+  std::vector<v1::SessionEvent> events;
+  std::thread watcher([&] { events = WatchAll(created->name(), 0, &watch_end); });
+  ASSERT_TRUE(WaitForLocalPort("tcp", PortOf(url), std::chrono::seconds(5)));
+  {
+    FfmpegProcess camera(
+        {"-re", "-i", *drive_path_, "-c", "copy", "-f", "rtsp", "-rtsp_transport", "tcp", url});
+    ASSERT_TRUE(camera.started());
+    EXPECT_EQ(camera.Wait(std::chrono::seconds(15)), 0);
+  }
+  watcher.join();  // bounded by the client's watch deadline
+  ASSERT_TRUE(watch_end.ok()) << watch_end.ToString();
+  EXPECT_GT(CountPoses(events), 5);
+  ASSERT_FALSE(events.empty());
+  EXPECT_EQ(events.back().state_change().state(), v1::Session::FINISHED)
+      << events.back().state_change().message();
+  auto got = client_->GetSession(created->name());
+  ASSERT_TRUE(got.ok()) << got.status().ToString();
+  EXPECT_GT(got->stats().frames(), 40);
+}
+
+// RTP has no end marker: the session finishes after receive_timeout_ms of silence.
+TEST_F(ServerTest, RtpSdpStreamsPosesUntilTheReceiveTimeout) {
+  const int port = FreeRtpPort();
+  ASSERT_GT(port, 0);
+  v1::Session request = UploadRequest();
+  request.mutable_rtp_sdp()->set_sdp(Mpeg2RtpSdp(port));
+  request.mutable_rtp_sdp()->set_start_timeout_ms(10000);
+  request.mutable_rtp_sdp()->set_receive_timeout_ms(1000);
+  auto created = client_->CreateSession(request);
+  ASSERT_TRUE(created.ok()) << created.status().ToString();
+  EXPECT_TRUE(created->ingest_url().empty());
+  Status watch_end;
+  std::vector<v1::SessionEvent> events;
+  std::thread watcher([&] { events = WatchAll(created->name(), 0, &watch_end); });
+  // Send only once the receiver has bound its port: UDP drops what comes early.
+  ASSERT_TRUE(WaitForLocalPort("udp", port, std::chrono::seconds(5)));
+  {
+    FfmpegProcess camera({"-re", "-i", *drive_path_, "-c", "copy", "-f", "rtp",
+                          "rtp://127.0.0.1:" + std::to_string(port)});
+    ASSERT_TRUE(camera.started());
+    EXPECT_EQ(camera.Wait(std::chrono::seconds(15)), 0);
+  }
+  watcher.join();
+  ASSERT_TRUE(watch_end.ok()) << watch_end.ToString();
+  EXPECT_GT(CountPoses(events), 5);
+  ASSERT_FALSE(events.empty());
+  EXPECT_EQ(events.back().state_change().state(), v1::Session::FINISHED);
+  EXPECT_NE(events.back().state_change().message().find("receive_timeout_ms=1000"),
+            std::string::npos)
+      << events.back().state_change().message();
+}
+
+TEST_F(ServerTest, BadNetworkSourcesAreInvalidArgument) {
+  v1::Session request = UploadRequest();
+  for (const std::string sdp : {std::string(), std::string("hello"),
+                                std::string("v=0\nc=IN IP4 127.0.0.1\nm=audio 5004 RTP/AVP 0\n"),
+                                std::string("v=0\nm=video 5004 RTP/AVP 32\n"),
+                                std::string("v=0\nc=IN IP4 127.0.0.1\nm=video x RTP/AVP 32\n")}) {
+    request.mutable_rtp_sdp()->set_sdp(sdp);
+    EXPECT_EQ(client_->CreateSession(request).status().code(), StatusCode::kInvalidArgument) << sdp;
+  }
+  request.mutable_rtp_sdp()->set_sdp(Mpeg2RtpSdp(5004));
+  request.mutable_rtp_sdp()->set_receive_timeout_ms(-1);
+  EXPECT_EQ(client_->CreateSession(request).status().code(), StatusCode::kInvalidArgument);
+  for (const std::string path : {"", "/cam", "a b", "cam?x=1"}) {
+    request.mutable_rtsp_push()->set_path(path);
+    EXPECT_EQ(client_->CreateSession(request).status().code(), StatusCode::kInvalidArgument)
+        << path;
+  }
+}
+
+// Starts a camera publishing to a new RTSP push session and waits until the
+// session has decoded 10 frames. Returns the session name.
+std::string StartRtspCamera(SlapseClient* client, v1::Session request, const std::string& drive,
+                            std::unique_ptr<FfmpegProcess>* camera) {
+  auto created = client->CreateSession(request);
+  EXPECT_TRUE(created.ok()) << created.status().ToString();
+  if (!created.ok()) return "";
+  const std::string url = created->ingest_url();
+  EXPECT_TRUE(WaitForLocalPort("tcp", PortOf(url), std::chrono::seconds(5)));
+  *camera = std::make_unique<FfmpegProcess>(std::vector<std::string>{
+      "-re", "-i", drive, "-c", "copy", "-f", "rtsp", "-rtsp_transport", "tcp", url});
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  int64_t frames = 0;
+  while (frames < 10 && std::chrono::steady_clock::now() < deadline) {
+    auto got = client->GetSession(created->name());
+    if (!got.ok()) break;
+    frames = got->stats().frames();
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  EXPECT_GE(frames, 10);
+  return created->name();
+}
+
+// A camera that stops mid-stream ends the session visibly and soon, never a
+// hang: frozen (connection open, silent) it FAILs with UNAVAILABLE after
+// receive_timeout_ms; killed (connection closed) it ends at once.
+TEST_F(ServerTest, RtspCameraThatStopsMidStreamEndsTheSession) {
+  v1::Session request = UploadRequest();
+  request.mutable_rtsp_push()->set_path("cam2");
+  request.mutable_rtsp_push()->set_start_timeout_ms(10000);
+  request.mutable_rtsp_push()->set_receive_timeout_ms(1000);
+
+  std::unique_ptr<FfmpegProcess> camera;
+  std::string name = StartRtspCamera(client_.get(), request, *drive_path_, &camera);
+  ASSERT_FALSE(name.empty());
+  camera->Freeze();
+  auto t0 = std::chrono::steady_clock::now();
+  Status watch_end;
+  std::vector<v1::SessionEvent> events = WatchAll(name, 0, &watch_end);
+  ASSERT_TRUE(watch_end.ok()) << watch_end.ToString();
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(4));
+  EXPECT_GT(CountPoses(events), 0);
+  auto got = client_->GetSession(name);
+  ASSERT_TRUE(got.ok()) << got.status().ToString();
+  EXPECT_EQ(got->state(), v1::Session::FAILED);
+  EXPECT_EQ(got->error().code(), static_cast<int>(StatusCode::kUnavailable))
+      << got->error().message();
+  EXPECT_NE(got->error().message().find("receive_timeout_ms=1000"), std::string::npos);
+  camera->Kill();
+
+  name = StartRtspCamera(client_.get(), request, *drive_path_, &camera);
+  ASSERT_FALSE(name.empty());
+  camera->Kill();
+  t0 = std::chrono::steady_clock::now();
+  events = WatchAll(name, 0, &watch_end);
+  ASSERT_TRUE(watch_end.ok()) << watch_end.ToString();
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(4));
+  ASSERT_FALSE(events.empty());
+  const v1::StateChange& last = events.back().state_change();
+  EXPECT_TRUE(last.state() == v1::Session::FINISHED || last.state() == v1::Session::FAILED)
+      << last.state();
+  EXPECT_FALSE(last.message().empty());
+}
+
+// No publisher: start_timeout_ms fails the session; StopSession aborts the wait.
+TEST_F(ServerTest, RtspListenerWithoutPublisherTimesOutOrStops) {
+  v1::Session request = UploadRequest();
+  request.mutable_rtsp_push()->set_path("nobody");
+  request.mutable_rtsp_push()->set_start_timeout_ms(300);
+  auto created = client_->CreateSession(request);
+  ASSERT_TRUE(created.ok()) << created.status().ToString();
+  Status end;
+  WatchAll(created->name(), 0, &end);
+  ASSERT_TRUE(end.ok()) << end.ToString();
+  auto got = client_->GetSession(created->name());
+  ASSERT_TRUE(got.ok());
+  EXPECT_EQ(got->state(), v1::Session::FAILED);
+  EXPECT_EQ(got->error().code(), static_cast<int>(StatusCode::kDeadlineExceeded));
+
+  request.mutable_rtsp_push()->set_start_timeout_ms(60000);
+  auto waiting = client_->CreateSession(request);
+  ASSERT_TRUE(waiting.ok()) << waiting.status().ToString();
+  ASSERT_TRUE(WaitForLocalPort("tcp", PortOf(waiting->ingest_url()), std::chrono::seconds(5)));
+  const auto t0 = std::chrono::steady_clock::now();
+  ASSERT_TRUE(client_->StopSession(waiting->name()).ok());
+  WatchAll(waiting->name(), 0, &end);
+  ASSERT_TRUE(end.ok()) << end.ToString();
+  EXPECT_EQ(client_->GetSession(waiting->name())->state(), v1::Session::STOPPED);
+  // The worker is free again: the server shuts down promptly.
+  server_->Shutdown();
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(3));
 }
 
 TEST_F(ServerTest, UnknownSessionIsNotFound) {

@@ -5,7 +5,9 @@
 #include <google/protobuf/util/json_util.h>
 
 #include <cstdio>
+#include <fstream>
 #include <memory>
+#include <sstream>
 
 #include "client/cli/commands.h"
 #include "client/cli/flags.h"
@@ -74,12 +76,14 @@ void PrintSessionLine(const v1::Session& s) {
 }  // namespace
 
 int RunServe(int argc, char** argv) {
-  Flags flags("serve", "[options]   (runs until SIGINT or SIGTERM, then shuts down gracefully)",
-              {{"address", "ADDR", "address to listen on", "0.0.0.0"},
-               {"port", "PORT", "TCP port (0: pick a free one)", "50051"},
-               {"max-sessions", "N", "sessions active at once (worker threads)", "4"},
-               {"max-upload-mb", "MB", "bytes one upload may send, MiB (0: no limit)", "4096"},
-               {"event-ring", "N", "events kept per session for resuming watchers", "4096"}});
+  Flags flags(
+      "serve", "[options]   (runs until SIGINT or SIGTERM, then shuts down gracefully)",
+      {{"address", "ADDR", "address to listen on", "0.0.0.0"},
+       {"port", "PORT", "TCP port (0: pick a free one)", "50051"},
+       {"max-sessions", "N", "sessions active at once (worker threads)", "4"},
+       {"max-upload-mb", "MB", "bytes one upload may send, MiB (0: no limit)", "4096"},
+       {"event-ring", "N", "events kept per session for resuming watchers", "4096"},
+       {"rtsp-host", "IPV4", "address RTSP push listeners bind and advertise", "127.0.0.1"}});
   if (int rc = ParseOrExit(flags, "serve", argc, argv, 0); rc >= 0) return rc;
   server::ServerOptions o;
   o.address = flags.GetString("address");
@@ -95,6 +99,7 @@ int RunServe(int argc, char** argv) {
   o.sessions.max_sessions = static_cast<int>(*max_sessions);
   o.sessions.max_upload_bytes = *max_upload << 20;
   o.sessions.event_ring_capacity = static_cast<size_t>(*ring);
+  o.sessions.rtsp_push_host = flags.GetString("rtsp-host");
 
   // Block the shutdown signals before gRPC starts its threads; wait for them below.
   sigset_t signals;
@@ -117,18 +122,29 @@ int RunServe(int argc, char** argv) {
 
 int RunCreate(int argc, char** argv) {
   Flags flags(
-      "create", "--upload --intrinsics SPEC [options]   (prints the session name)",
+      "create",
+      "--upload|--rtsp-push PATH|--rtp-sdp FILE --intrinsics SPEC [options]\n"
+      "  (prints the session name; for --rtsp-push also the URL to publish to)",
       {kServerFlag,
-       {"upload", "", "the stream comes through 'slapse upload' (the only source so far)", ""},
+       {"upload", "", "the stream comes through 'slapse upload'", ""},
+       {"rtsp-push", "PATH", "a camera publishes (RTSP ANNOUNCE/RECORD) to the printed URL", ""},
+       {"rtp-sdp", "FILE", "the server receives the RTP that this SDP file describes", ""},
+       {"start-timeout-ms", "MS", "network sources: wait for the first frame (0: 60000)", "0"},
+       {"receive-timeout-ms", "MS", "network sources: wait between frames (0: 5000)", "0"},
        {"intrinsics", "SPEC", "FILE.json or 'fx,fy,cx,cy' (pixels)", ""},
        {"eps-h", "PX", "homography inlier threshold (0: default)", "0"},
        {"first-step-m", "M", "metric scale: length of the first tracked step", ""},
        {"speed-kmh", "V", "metric scale: speed at the start", ""},
        {"camera-height-m", "H", "metric scale: camera height above the road", ""}});
   if (int rc = ParseOrExit(flags, "create", argc, argv, 0); rc >= 0) return rc;
-  if (!flags.GetBool("upload")) {
-    return Fail("create", "give the source: --upload (RTSP and RTP sources are not served yet)", 2);
+  const int sources = flags.GetBool("upload") + flags.Has("rtsp-push") + flags.Has("rtp-sdp");
+  if (sources != 1) {
+    return Fail("create", "give one source: --upload, --rtsp-push PATH or --rtp-sdp FILE", 2);
   }
+  auto start_ms = flags.GetInt("start-timeout-ms", 0, 3600000);
+  auto receive_ms = flags.GetInt("receive-timeout-ms", 0, 3600000);
+  if (!start_ms.ok()) return Fail("create", start_ms.status().message(), 2);
+  if (!receive_ms.ok()) return Fail("create", receive_ms.status().message(), 2);
   const std::string spec = flags.GetString("intrinsics");
   if (spec.empty()) return Fail("create", "--intrinsics is required", 2);
   if (spec.rfind("hfov=", 0) == 0) {
@@ -139,7 +155,21 @@ int RunCreate(int argc, char** argv) {
                                : ParseIntrinsicsSpec(spec, 0, 0);
   if (!k.ok()) return Fail("create", k.status().message(), 2);
   v1::Session request;
-  request.mutable_upload();
+  if (flags.Has("rtsp-push")) {
+    request.mutable_rtsp_push()->set_path(flags.GetString("rtsp-push"));
+    request.mutable_rtsp_push()->set_start_timeout_ms(static_cast<int>(*start_ms));
+    request.mutable_rtsp_push()->set_receive_timeout_ms(static_cast<int>(*receive_ms));
+  } else if (flags.Has("rtp-sdp")) {
+    std::ifstream in(flags.GetString("rtp-sdp"), std::ios::binary);
+    if (!in) return Fail("create", "cannot read " + flags.GetString("rtp-sdp"), 2);
+    std::ostringstream sdp;
+    sdp << in.rdbuf();
+    request.mutable_rtp_sdp()->set_sdp(sdp.str());
+    request.mutable_rtp_sdp()->set_start_timeout_ms(static_cast<int>(*start_ms));
+    request.mutable_rtp_sdp()->set_receive_timeout_ms(static_cast<int>(*receive_ms));
+  } else {
+    request.mutable_upload();
+  }
   v1::Intrinsics* pk = request.mutable_intrinsics();
   pk->set_fx_px(k->fx_px);
   pk->set_fy_px(k->fy_px);
@@ -177,6 +207,7 @@ int RunCreate(int argc, char** argv) {
   auto session = Connect(flags)->CreateSession(request);
   if (!session.ok()) return Fail("create", session.status().ToString());
   std::printf("%s\n", session->name().c_str());
+  if (!session->ingest_url().empty()) std::printf("%s\n", session->ingest_url().c_str());
   return 0;
 }
 
