@@ -72,6 +72,12 @@ struct SyntheticPair {
   Rigid3d later_from_earlier;
 };
 
+std::vector<int> AllIndices(const AnchorPair& pair) {
+  std::vector<int> all(pair.correspondences.size());
+  for (size_t i = 0; i < all.size(); ++i) all[i] = static_cast<int>(i);
+  return all;
+}
+
 struct SceneNoise {
   double sigma_px = 0.25;
   double outlier_ratio = 0.2;
@@ -422,8 +428,7 @@ TEST(PlaneExtractorTest, DegenerateInputGivesNoPlane) {
   SceneNoise noise;
   noise.seed = 6;
   const SyntheticPair s = MakePair(Frame0(), Frame1(), 0, noise);
-  std::vector<int> all(s.label.size());
-  for (size_t i = 0; i < all.size(); ++i) all[i] = static_cast<int>(i);
+  const std::vector<int> all = AllIndices(s.pair);
 
   // One MB row: the MB centres are collinear.
   std::vector<int> row;
@@ -590,9 +595,7 @@ SyntheticPair MakeBandPair(int64_t earlier_index, const Eigen::Vector2d& pan_px,
 TEST(PlaneExtractorTest, TrackingFollowsMbsThroughLargeImageMotion) {
   const SyntheticPair s1 = MakeBandPair(0, {-5.0, 0.0}, /*bands_in_later=*/true, 10);
   const SyntheticPair s2 = MakeBandPair(1, {112.0, 0.0}, /*bands_in_later=*/false, 11);
-  std::vector<int> all1(s1.label.size()), all2(s2.label.size());
-  for (size_t i = 0; i < all1.size(); ++i) all1[i] = static_cast<int>(i);
-  for (size_t i = 0; i < all2.size(); ++i) all2[i] = static_cast<int>(i);
+  const std::vector<int> all1 = AllIndices(s1.pair), all2 = AllIndices(s2.pair);
 
   PlaneExtractor extractor(PlaneExtractionOptions{});
   const auto r1 = extractor.Process(s1.pair, all1);
@@ -637,9 +640,7 @@ TEST(PlaneExtractorTest, TakenOverTrackIsLostNotHijacked) {
     return band;
   };
   const SyntheticPair s2 = MakeBandPair(1, {-5.0, 0.0}, /*bands_in_later=*/false, 13, band_of_2);
-  std::vector<int> all1(s1.label.size()), all2(s2.label.size());
-  for (size_t i = 0; i < all1.size(); ++i) all1[i] = static_cast<int>(i);
-  for (size_t i = 0; i < all2.size(); ++i) all2[i] = static_cast<int>(i);
+  const std::vector<int> all1 = AllIndices(s1.pair), all2 = AllIndices(s2.pair);
 
   PlaneExtractor extractor(PlaneExtractionOptions{});
   const auto r1 = extractor.Process(s1.pair, all1);
@@ -702,12 +703,6 @@ AnchorPair EmptyGridPair() {
   pair.mb_cols = kCols;
   pair.mb_rows = kRows;
   return pair;
-}
-
-std::vector<int> AllIndices(const AnchorPair& pair) {
-  std::vector<int> all(pair.correspondences.size());
-  for (size_t i = 0; i < all.size(); ++i) all[i] = static_cast<int>(i);
-  return all;
 }
 
 Eigen::Matrix3d ExampleHomography(double shift_px) {
