@@ -331,13 +331,16 @@ TEST(ThresholdInfinityTest, BrokenContractIsInvalidArgument) {
   EXPECT_EQ(result.status().code(), StatusCode::kInvalidArgument);
 }
 
-// Runs thresholding and extraction on one pair.
+// Runs thresholding and extraction on one pair; with_motion: planes
+// constrained by the pair's motion from E (else free homographies).
 PlaneExtractionResult ExtractPlanes(PlaneExtractor* extractor, const SyntheticPair& s,
-                                    std::vector<int>* kept = nullptr) {
+                                    std::vector<int>* kept = nullptr, bool with_motion = false) {
   const auto inf = ThresholdInfinity(s.pair.correspondences, TestIntrinsics(), {});
   EXPECT_TRUE(inf.ok());
   if (kept != nullptr) *kept = inf->kept_indices;
-  auto planes = extractor->Process(s.pair, inf->kept_indices);
+  if (with_motion) EXPECT_TRUE(inf->has_motion);
+  auto planes = with_motion ? extractor->Process(s.pair, *inf, TestIntrinsics())
+                            : extractor->Process(s.pair, inf->kept_indices);
   EXPECT_TRUE(planes.ok()) << planes.status().ToString();
   return planes.ok() ? *planes : PlaneExtractionResult{};
 }
@@ -409,6 +412,16 @@ TEST(PlaneExtractorTest, RecoversRoadAndFacades) {
   for (const ExtractedPlane& p : result.planes) EXPECT_FALSE(p.tracked);
   // Track ids: 0, 1, 2, ... in discovery order.
   for (size_t k = 0; k < result.planes.size(); ++k) EXPECT_EQ(result.planes[k].track_id, k);
+}
+
+TEST(PlaneExtractorTest, RecoversRoadAndFacadesWithMotionConstrainedPlanes) {
+  SceneNoise noise;
+  noise.seed = 4;
+  const SyntheticPair s = MakePair(Frame0(), Frame1(), 0, noise);
+  PlaneExtractor extractor(PlaneExtractionOptions{});
+  std::vector<int> kept;
+  const PlaneExtractionResult result = ExtractPlanes(&extractor, s, &kept, /*with_motion=*/true);
+  ExpectPlanesRecovered(result, s, kept, Frame0(), Frame1());
 }
 
 TEST(PlaneExtractorTest, DeterministicGivenSeed) {

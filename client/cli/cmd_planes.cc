@@ -3,6 +3,7 @@
 // slapse eval-planes: the paper's Table I on simulated drives.
 #include <cstdio>
 #include <filesystem>
+#include <memory>
 #include <sstream>
 
 #include <opencv2/imgcodecs.hpp>
@@ -86,7 +87,7 @@ int RunPlanes(int argc, char** argv) {
     if (!pair.has_value()) continue;
     auto inf = ThresholdInfinity(pair->correspondences, *intrinsics, io);
     if (!inf.ok()) return Fail("planes", inf.status().ToString());
-    auto planes = extractor.Process(*pair, inf->kept_indices);
+    auto planes = extractor.Process(*pair, *inf, *intrinsics);
     if (!planes.ok()) return Fail("planes", planes.status().ToString());
     if (pair->later_index < *frame_index) continue;
     const cv::Mat picture =
@@ -116,7 +117,14 @@ int RunEvalPlanes(int argc, char** argv) {
       {{"seeds", "LIST", "simulated drives to evaluate", "1,2,3,4,5"},
        {"eps-h", "LIST", "homography thresholds to sweep, px", "1,2,3,4"},
        {"dir", "DIR", "where the drives are simulated (reused if present)", "out/eval-planes"},
-       {"duration-s", "S", "length of each drive", "10"}});
+       {"duration-s", "S", "length of each drive", "10"},
+       {"tau-inf", "PX", "plane-at-infinity threshold, px",
+        std::to_string(static_cast<int>(InfinityOptions{}.tau_inf_px))},
+       {"free-homography", "",
+        "fit free 8-parameter homographies (the paper's way), not ones "
+        "consistent with the pair's motion",
+        ""},
+       {"planes-csv", "FILE", "also write one CSV row per extracted plane (scores)", ""}});
   if (Status s = flags.Parse(argc, argv); !s.ok()) return Fail("eval-planes", s.message(), 2);
   if (flags.help_requested()) {
     std::printf("%s", flags.Usage().c_str());
@@ -125,8 +133,17 @@ int RunEvalPlanes(int argc, char** argv) {
   auto seeds = ParseList(flags.GetString("seeds"), "seeds");
   auto eps_list = ParseList(flags.GetString("eps-h"), "eps-h");
   auto duration = flags.GetDouble("duration-s", 1, 600);
-  for (const Status* s : {&seeds.status(), &eps_list.status(), &duration.status()}) {
+  auto tau = flags.GetDouble("tau-inf", 0, 100);
+  for (const Status* s : {&seeds.status(), &eps_list.status(), &duration.status(), &tau.status()}) {
     if (!s->ok()) return Fail("eval-planes", s->message(), 2);
+  }
+  std::unique_ptr<std::FILE, int (*)(std::FILE*)> csv(nullptr, &std::fclose);
+  if (flags.Has("planes-csv")) {
+    csv.reset(std::fopen(flags.GetString("planes-csv").c_str(), "w"));
+    if (!csv) return Fail("eval-planes", "cannot write " + flags.GetString("planes-csv"));
+    std::fprintf(csv.get(),
+                 "drive,later_index,track_id,tracked,mbs,mean_mb_row,gt_plane,gt_kind,purity,"
+                 "mixed_share,transfer_px,true_positive,rms_transfer_px\n");
   }
   std::vector<std::string> dirs;
   for (double seed : *seeds) {
@@ -148,6 +165,9 @@ int RunEvalPlanes(int argc, char** argv) {
   for (double eps : *eps_list) {
     ExtractionEvalOptions eo;
     eo.extraction.eps_h_px = eps;
+    eo.extraction.use_motion = !flags.Has("free-homography");
+    eo.infinity.tau_inf_px = *tau;
+    eo.planes_csv = csv.get();
     ExtractionStats total;
     for (const std::string& dir : dirs) {
       auto stats = EvaluateExtraction(dir, eo);

@@ -1,5 +1,6 @@
 #include "core/eval/extraction_eval.h"
 
+#include <algorithm>
 #include <chrono>
 #include <fstream>
 
@@ -66,10 +67,25 @@ StatusOr<ExtractionStats> EvaluateExtraction(const std::string& drive_dir,
     stats.threshold_ms += MsSince(t0);
     if (!inf.ok()) return inf.status();
     t0 = std::chrono::steady_clock::now();
-    auto extraction = extractor.Process(*pair, inf->kept_indices);
+    auto extraction = extractor.Process(*pair, *inf, gt->intrinsics);
     stats.fit_ms += MsSince(t0);
     if (!extraction.ok()) return extraction.status();
     const PairPlaneEvaluation ev = EvaluatePlanes(*pair, extraction->planes, *gt, options.truth);
+    if (options.planes_csv != nullptr) {
+      for (size_t k = 0; k < ev.matches.size(); ++k) {
+        const PlaneMatch& m = ev.matches[k];
+        const ExtractedPlane& p = extraction->planes[k];
+        double mean_row = 0;
+        for (int mb : p.mb_indices) mean_row += mb / pair->mb_cols;
+        mean_row /= std::max<size_t>(1, p.mb_indices.size());
+        std::fprintf(options.planes_csv, "%s,%lld,%d,%d,%zu,%.1f,%d,%s,%.3f,%.3f,%.3f,%d,%.3f\n",
+                     drive_dir.c_str(), static_cast<long long>(pair->later_index), m.track_id,
+                     p.tracked ? 1 : 0, p.mb_indices.size(), mean_row, m.gt_plane,
+                     m.gt_plane >= 0 ? PlaneKindName(gt->planes[m.gt_plane].kind) : "none",
+                     m.purity, m.mixed_share, m.transfer_px, m.true_positive ? 1 : 0,
+                     p.rms_transfer_px);
+      }
+    }
     ++stats.pairs;
     stats.planes += static_cast<int>(ev.matches.size());
     for (const PlaneMatch& m : ev.matches) stats.true_positives += m.true_positive;

@@ -2,6 +2,7 @@
 // truth (the paper's Table I on simulated streams).
 #pragma once
 
+#include <cstdio>
 #include <string>
 
 #include "core/common/status.h"
@@ -34,6 +35,9 @@ struct ExtractionEvalOptions {
   InfinityOptions infinity;
   PlaneExtractionOptions extraction;
   PlaneTruthOptions truth;
+  // If set, one CSV row per extracted plane is appended here (for studying
+  // the false positives): drive, pair, plane and its scores.
+  std::FILE* planes_csv = nullptr;
 };
 
 // Reads `drive_dir` (a `slapse simulate` output: video + ground truth), runs

@@ -51,11 +51,11 @@ PipelineStep Pipeline::Process(const AnchorPair& pair) {
   StatusOr<InfinityResult> inf =
       ThresholdInfinity(pair.correspondences, intrinsics_, options_.infinity);
   step.times.threshold_ms = MsSince(t0);
-  std::vector<int> kept;
-  if (inf.ok()) kept = inf->kept_indices;
-  step.kept = static_cast<int>(kept.size());
+  step.kept = inf.ok() ? static_cast<int>(inf->kept_indices.size()) : 0;
   t0 = std::chrono::steady_clock::now();
-  StatusOr<PlaneExtractionResult> extraction = extractor_.Process(pair, kept);
+  StatusOr<PlaneExtractionResult> extraction = inf.ok()
+                                                   ? extractor_.Process(pair, *inf, intrinsics_)
+                                                   : extractor_.Process(pair, std::vector<int>{});
   step.times.fit_ms = MsSince(t0);
   if (extraction.ok()) step.extracted = extraction->planes;
 

@@ -2,9 +2,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
+#include <memory>
 #include <string>
 #include <utility>
 
+#include "core/estimators/epipolar_plane.h"
 #include "core/estimators/homography.h"
 #include "core/estimators/ransac.h"
 
@@ -122,6 +125,90 @@ int CountSet(const std::vector<char>& mask) {
   return static_cast<int>(std::count(mask.begin(), mask.end(), 1));
 }
 
+// Plane hypotheses over a point set, reported as homographies H (x_earlier ~
+// H x_later), from either estimator.
+class PlaneFitter {
+ public:
+  virtual ~PlaneFitter() = default;
+  virtual void SetPoints(const std::vector<Eigen::Vector2d>& x_later,
+                         const std::vector<Eigen::Vector2d>& x_earlier) = 0;
+  virtual RansacReport<Eigen::Matrix3d> Ransac(const RansacOptions& options,
+                                               const std::vector<int>* subset) const = 0;
+  // Least-squares fit to the points of `mask`, with the squared residuals of
+  // all points; false when the points are degenerate.
+  virtual bool FitMasked(const std::vector<char>& mask, Eigen::Matrix3d* H,
+                         std::vector<double>* sq_residuals) const = 0;
+  // Minimal sample size.
+  virtual int MinSamples() const = 0;
+};
+
+template <typename Estimator>
+class EstimatorPlaneFitter : public PlaneFitter {
+ public:
+  using X_t = typename Estimator::X_t;
+  using M_t = typename Estimator::M_t;
+  EstimatorPlaneFitter(std::function<std::vector<X_t>(const std::vector<Eigen::Vector2d>&)> prepare,
+                       std::function<Eigen::Matrix3d(const M_t&)> to_homography)
+      : prepare_(std::move(prepare)), to_homography_(std::move(to_homography)) {}
+
+  void SetPoints(const std::vector<Eigen::Vector2d>& x_later,
+                 const std::vector<Eigen::Vector2d>& x_earlier) override {
+    X_ = prepare_(x_later);
+    Y_ = x_earlier;
+  }
+  RansacReport<Eigen::Matrix3d> Ransac(const RansacOptions& options,
+                                       const std::vector<int>* subset) const override {
+    const RansacReport<M_t> report = slapse::Ransac<Estimator>(options).Estimate(X_, Y_, subset);
+    RansacReport<Eigen::Matrix3d> out;
+    out.success = report.success;
+    out.num_trials = report.num_trials;
+    out.support = report.support;
+    out.inlier_mask = report.inlier_mask;
+    if (report.success) out.model = to_homography_(report.model);
+    return out;
+  }
+  bool FitMasked(const std::vector<char>& mask, Eigen::Matrix3d* H,
+                 std::vector<double>* sq_residuals) const override {
+    std::vector<X_t> fit_x;
+    std::vector<Eigen::Vector2d> fit_y;
+    for (size_t j = 0; j < mask.size(); ++j) {
+      if (!mask[j]) continue;
+      fit_x.push_back(X_[j]);
+      fit_y.push_back(Y_[j]);
+    }
+    std::vector<M_t> models;
+    Estimator::Estimate(fit_x, fit_y, &models);
+    if (models.empty()) return false;
+    Estimator::Residuals(X_, Y_, models[0], sq_residuals);
+    *H = to_homography_(models[0]);
+    return true;
+  }
+  int MinSamples() const override { return Estimator::kMinNumSamples; }
+
+ private:
+  std::function<std::vector<X_t>(const std::vector<Eigen::Vector2d>&)> prepare_;
+  std::function<Eigen::Matrix3d(const M_t&)> to_homography_;
+  std::vector<X_t> X_;
+  std::vector<Eigen::Vector2d> Y_;
+};
+
+std::unique_ptr<PlaneFitter> MakeFitter(const PairMotion* motion) {
+  if (motion == nullptr) {
+    return std::make_unique<EstimatorPlaneFitter<HomographyEstimator>>(
+        [](const std::vector<Eigen::Vector2d>& x) { return x; },
+        [](const Eigen::Matrix3d& H) { return H; });
+  }
+  const Intrinsics intrinsics = motion->intrinsics;
+  const Rigid3d earlier_from_later = motion->later_from_earlier.Inverse();
+  return std::make_unique<EstimatorPlaneFitter<EpipolarPlaneEstimator>>(
+      [=](const std::vector<Eigen::Vector2d>& x) {
+        return EpipolarPlaneEstimator::Prepare(x, intrinsics, earlier_from_later);
+      },
+      [=](const Eigen::Vector3d& m) {
+        return EpipolarPlaneEstimator::Homography(m, intrinsics, earlier_from_later);
+      });
+}
+
 }  // namespace
 
 PlaneExtractor::PlaneExtractor(PlaneExtractionOptions options) : options_(std::move(options)) {}
@@ -133,7 +220,15 @@ void PlaneExtractor::Reset() {
 }
 
 StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
-                                                        const std::vector<int>& kept_indices) {
+                                                        const InfinityResult& infinity,
+                                                        const Intrinsics& intrinsics) {
+  const PairMotion motion{intrinsics, infinity.later_from_earlier};
+  return Process(pair, infinity.kept_indices, infinity.has_motion ? &motion : nullptr);
+}
+
+StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
+                                                        const std::vector<int>& kept_indices,
+                                                        const PairMotion* motion) {
   const auto& corr = pair.correspondences;
   const int num_corr = static_cast<int>(corr.size());
   if (pair.mb_cols <= 0 || pair.mb_rows <= 0) {
@@ -165,6 +260,8 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
   ransac_options.max_num_trials = options_.max_trials_per_plane;
   uint64_t ransac_call = 0;
 
+  const std::unique_ptr<PlaneFitter> fitter =
+      MakeFitter(options_.use_motion && motion != nullptr ? motion : nullptr);
   std::vector<Eigen::Vector2d> x_later, x_earlier;  // of `remaining`
   std::vector<int> mb_of;                           // of `remaining`
   // Runs RANSAC over `remaining` (local indices in `subset`).
@@ -177,8 +274,9 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
       x_earlier[j] = corr[remaining[j]].x_earlier_px;
       mb_of[j] = corr[remaining[j]].mb_index;
     }
+    fitter->SetPoints(x_later, x_earlier);
     ransac_options.seed = MixSeed(options_.seed, ransac_call++);
-    return Ransac<HomographyEstimator>(ransac_options).Estimate(x_later, x_earlier, subset);
+    return fitter->Ransac(ransac_options, subset);
   };
   // A plane hypothesis over `remaining`: its homography and inlier mask.
   struct Consensus {
@@ -202,27 +300,17 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
   auto post_process = [&](const RansacReport<Eigen::Matrix3d>& report) {
     Consensus best{report.model, largest_component(report.inlier_mask)};
     int best_count = CountSet(best.mask);
-    std::vector<Eigen::Vector2d> fit_later, fit_earlier;
-    std::vector<Eigen::Matrix3d> models;
     std::vector<double> sq_residuals;
     for (int iter = 0; iter < options_.refit_iterations; ++iter) {
-      fit_later.clear();
-      fit_earlier.clear();
-      for (size_t j = 0; j < best.mask.size(); ++j) {
-        if (!best.mask[j]) continue;
-        fit_later.push_back(x_later[j]);
-        fit_earlier.push_back(x_earlier[j]);
-      }
-      HomographyEstimator::Estimate(fit_later, fit_earlier, &models);
-      if (models.empty()) break;
-      HomographyEstimator::Residuals(x_later, x_earlier, models[0], &sq_residuals);
+      Eigen::Matrix3d H;
+      if (!fitter->FitMasked(best.mask, &H, &sq_residuals)) break;
       std::vector<char> mask(sq_residuals.size());
       for (size_t j = 0; j < mask.size(); ++j) mask[j] = sq_residuals[j] <= max_sq_error ? 1 : 0;
       mask = largest_component(mask);
       const int count = CountSet(mask);
       if (count < best_count) break;
       const bool stable = mask == best.mask;
-      best = {models[0], std::move(mask)};
+      best = {H, std::move(mask)};
       best_count = count;
       if (stable) break;
     }
@@ -239,6 +327,17 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
       plane.correspondence_indices.push_back(remaining[j]);
       plane.mb_indices.push_back(corr[remaining[j]].mb_index);
     }
+    std::vector<double> sq_transfer;
+    std::vector<Eigen::Vector2d> plane_later, plane_earlier;
+    for (int i : plane.correspondence_indices) {
+      plane_later.push_back(corr[i].x_later_px);
+      plane_earlier.push_back(corr[i].x_earlier_px);
+    }
+    HomographyEstimator::Residuals(plane_later, plane_earlier, consensus.H, &sq_transfer);
+    double sum_sq = 0;
+    for (double r : sq_transfer) sum_sq += r;
+    plane.rms_transfer_px =
+        sq_transfer.empty() ? 0.0 : std::sqrt(sum_sq / static_cast<double>(sq_transfer.size()));
     std::sort(plane.mb_indices.begin(), plane.mb_indices.end());
     plane.mb_indices.erase(std::unique(plane.mb_indices.begin(), plane.mb_indices.end()),
                            plane.mb_indices.end());
@@ -258,7 +357,7 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
   };
 
   PlaneExtractionResult result;
-  const int min_mbs = std::max(options_.min_mbs_per_plane, HomographyEstimator::kMinNumSamples);
+  const int min_mbs = std::max(options_.min_mbs_per_plane, fitter->MinSamples());
 
   // 1. Tracking.
   const bool can_track = has_previous_ && pair.earlier_index == last_later_index_;
@@ -272,7 +371,7 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
         if (cell >= 0 && track.mb_cells.count(cell)) subset.push_back(static_cast<int>(j));
       }
       if (static_cast<int>(result.planes.size()) >= options_.max_planes ||
-          static_cast<int>(subset.size()) < HomographyEstimator::kMinNumSamples) {
+          static_cast<int>(subset.size()) < fitter->MinSamples()) {
         ++result.num_tracks_lost;
         continue;
       }
@@ -301,7 +400,7 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
   std::vector<int> set_aside;  // inliers of models whose largest component was too small
   int failed_discoveries = 0;
   while (static_cast<int>(result.planes.size()) < options_.max_planes &&
-         static_cast<int>(remaining.size()) >= HomographyEstimator::kMinNumSamples) {
+         static_cast<int>(remaining.size()) >= fitter->MinSamples()) {
     const RansacReport<Eigen::Matrix3d> report = run_ransac(nullptr);
     if (!report.success) break;
     const Consensus consensus = post_process(report);

@@ -4,8 +4,10 @@
 // Homography convention: x_earlier ~ H_earlier_from_later * x_later (pixels,
 // homogeneous), as in the paper's x_k ~ H x^c_{k+1}. A correspondence is an
 // inlier of H iff ||x_earlier - dehom(H x_later)|| <= eps_h_px (transfer error
-// in the earlier anchor). H is estimated by HomographyEstimator (normalised
-// DLT; ||H||_F = 1, sign such that (H x_later)_z > 0 on its inliers).
+// in the earlier anchor). H is estimated by EpipolarPlaneEstimator when the
+// pair's motion is known (use_motion; 3-parameter planes consistent with it),
+// else by HomographyEstimator (normalised DLT); either way ||H||_F = 1 and
+// (H x_later)_z > 0 on its inliers.
 // For a plane n^T X = d in the *later* camera frame (n unit, d > 0) and
 // earlier_from_later = (R, t) (X_earlier = R X_later + t):
 //   X_earlier = (R + t n^T / d) X_later  =>  H ~ K (R + t n^T / d) K^{-1}.
@@ -52,8 +54,11 @@
 
 #include <Eigen/Core>
 
+#include "core/common/camera.h"
+#include "core/common/rigid3.h"
 #include "core/common/status.h"
 #include "core/merge/correspondence.h"
+#include "core/planes/infinity.h"
 
 namespace slapse {
 
@@ -99,6 +104,19 @@ struct PlaneExtractionOptions {
   // component is below min_mbs_per_plane (their inliers are set aside for the
   // rest of the pair and reported as unassigned). 0: stop at the first.
   int max_failed_discoveries = 2;
+  // With the pair's motion (Process's `motion`), fit planes as 3-parameter
+  // homographies H = K (R + t m^T) K^-1 consistent with it
+  // (core/estimators/epipolar_plane.h: 3-point samples, planes in front of
+  // the camera) instead of free 8-parameter ones. Beyond the paper.
+  bool use_motion = true;
+};
+
+// The relative motion of an anchor pair, when the epipolar geometry was
+// observed (ThresholdInfinity's has_motion): X_later = R X_earlier + t with
+// t != 0 (up to scale).
+struct PairMotion {
+  Intrinsics intrinsics;
+  Rigid3d later_from_earlier;
 };
 
 struct ExtractedPlane {
@@ -107,6 +125,10 @@ struct ExtractedPlane {
   std::vector<int> correspondence_indices;  // into pair.correspondences, ascending
   std::vector<int> mb_indices;              // distinct MB indices in the later anchor, ascending
   bool tracked = false;                     // continued from the previous pair
+  // Root mean square of the transfer errors |x_earlier - H x_later| of its
+  // correspondences, px: near the MV noise for a real plane, near eps_h / sqrt(2)
+  // for points that fit only by accident.
+  double rms_transfer_px = 0.0;
   // Tracked planes only: the sampling subset (correspondences on the track's
   // old MBs) and how many of it are inliers of this plane.
   int track_subset_size = 0;
@@ -127,8 +149,14 @@ class PlaneExtractor {
   // ignored). InvalidArgument (state unchanged) when an index is out of range,
   // the MB grid is empty, or a kept correspondence has an mb_index outside it
   // or non-finite coordinates.
+  // motion: the pair's relative motion if known (see use_motion), else null.
   StatusOr<PlaneExtractionResult> Process(const AnchorPair& pair,
-                                          const std::vector<int>& kept_indices);
+                                          const std::vector<int>& kept_indices,
+                                          const PairMotion* motion = nullptr);
+  // The same after ThresholdInfinity: its kept correspondences, and its motion
+  // when it observed one (has_motion).
+  StatusOr<PlaneExtractionResult> Process(const AnchorPair& pair, const InfinityResult& infinity,
+                                          const Intrinsics& intrinsics);
 
   // Forgets the remembered planes (track ids keep increasing).
   void Reset();
