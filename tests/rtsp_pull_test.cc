@@ -81,6 +81,10 @@ class RtspServerProcess {
   // "rtsp://127.0.0.1:PORT/drive", empty if the server did not come up.
   const std::string& url() const { return url_; }
   int port() const { return port_; }
+  // SIGSTOP: its connections stay open, nothing is sent.
+  void Freeze() {
+    if (pid_ > 0) kill(pid_, SIGSTOP);
+  }
   void Kill() {
     if (pid_ <= 0) return;
     kill(pid_, SIGKILL);
@@ -384,6 +388,48 @@ TEST_F(RtspPullTest, ReconnectsWhenTheServerComesBackThenGivesUp) {
   for (int i = 1; i < traj->points_size(); ++i) {
     EXPECT_GT(traj->points(i).anchor_index(), traj->points(i - 1).anchor_index());
   }
+}
+
+// Without reconnects: a path the server does not serve fails at once with
+// the server's answer; a server that falls silent fails the session after
+// receive_timeout_ms. Both UNAVAILABLE, with what to look at in the message.
+TEST_F(RtspPullTest, WrongPathAndSilentServerFailUnavailable) {
+  RtspServerProcess camera(*drive_path_, 0);
+  ASSERT_FALSE(camera.url().empty()) << "tests/rtsp_server.py did not start";
+  auto wrong = client_->CreateSession(PullRequest(camera.url() + "-nope"));
+  ASSERT_TRUE(wrong.ok()) << wrong.status().ToString();
+  Status end;
+  WatchAll(wrong->name(), &end);
+  ASSERT_TRUE(end.ok()) << end.ToString();
+  auto got = client_->GetSession(wrong->name());
+  ASSERT_TRUE(got.ok()) << got.status().ToString();
+  EXPECT_EQ(got->state(), v1::Session::FAILED);
+  EXPECT_EQ(got->error().code(), static_cast<int>(StatusCode::kUnavailable));
+  EXPECT_NE(got->error().message().find("404"), std::string::npos) << got->error().message();
+  EXPECT_NE(got->error().message().find(camera.url() + "-nope"), std::string::npos)
+      << got->error().message();
+
+  v1::Session request = PullRequest(camera.url());
+  request.mutable_rtsp_pull()->set_receive_timeout_ms(1000);
+  auto created = client_->CreateSession(request);
+  ASSERT_TRUE(created.ok()) << created.status().ToString();
+  v1::Session s;
+  ASSERT_TRUE(WaitFor(
+      created->name(), std::chrono::seconds(10),
+      [](const v1::Session& x) { return x.stats().frames() >= 10; }, &s))
+      << s.DebugString();
+  camera.Freeze();
+  const auto t0 = Clock::now();
+  WatchAll(created->name(), &end);
+  ASSERT_TRUE(end.ok()) << end.ToString();
+  EXPECT_LT(Clock::now() - t0, std::chrono::seconds(5));
+  got = client_->GetSession(created->name());
+  ASSERT_TRUE(got.ok()) << got.status().ToString();
+  EXPECT_EQ(got->state(), v1::Session::FAILED);
+  EXPECT_EQ(got->error().code(), static_cast<int>(StatusCode::kUnavailable));
+  EXPECT_NE(got->error().message().find("receive_timeout_ms=1000"), std::string::npos)
+      << got->error().message();
+  EXPECT_GE(got->stats().frames(), 10);
 }
 
 // StopSession and DeleteSession end a reconnect wait at once: the worker is
