@@ -50,8 +50,7 @@ class RtspServerProcess {
     pid_ = fork();
     if (pid_ == 0) {
       dup2(out[1], 1);
-      close(out[0]);
-      close(out[1]);
+      close_range(3, ~0U, 0);  // not the test's sockets (gRPC, other servers' pipes)
       execv(c[0], c.data());
       _exit(127);
     }
