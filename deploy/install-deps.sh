@@ -20,6 +20,11 @@ PACKAGES=(
   libgrpc++-dev libprotobuf-dev protobuf-compiler protobuf-compiler-grpc
   # tests
   libgtest-dev libgmock-dev
+  # tests: the real RTSP server the RTSP pull tests pull from (tests/rtsp_server.py):
+  # GStreamer's gst-rtsp-server driven from Python; runs as root, unlike VLC.
+  # tsdemux + mpegvideoparse are in plugins-bad, rtpmpvpay in plugins-good.
+  python3-gi gir1.2-gst-rtsp-server-1.0
+  gstreamer1.0-plugins-base gstreamer1.0-plugins-good gstreamer1.0-plugins-bad
 )
 
 missing=()

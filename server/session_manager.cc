@@ -7,9 +7,11 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <cstdlib>
+#include <optional>
 #include <set>
 
 #include "core/mv/mv_reader.h"
@@ -27,11 +29,18 @@ bool IsTerminal(v1::Session::State s) {
 
 bool Finite(double v) { return std::isfinite(v); }
 
-// Network sources: defaults of RtspPush / RtpSdp start_timeout_ms and
-// receive_timeout_ms (0 in the request), and the largest SDP accepted.
+// Network sources: defaults of RtspPull / RtspPush / RtpSdp start_timeout_ms
+// and receive_timeout_ms (0 in the request), and the largest SDP accepted.
 constexpr int kDefaultStartTimeoutMs = 60000;
 constexpr int kDefaultReceiveTimeoutMs = 5000;
 constexpr size_t kMaxSdpBytes = 64 << 10;
+// RTSP pull: ReconnectPolicy defaults (0 in the request) and bounds.
+constexpr int kDefaultReconnectIntervalMs = 1000;
+constexpr double kDefaultBackoffMultiplier = 2.0;
+constexpr int kDefaultMaxReconnectIntervalMs = 30000;
+constexpr int kMaxReconnectAttempts = 1000000;
+constexpr int kMaxReconnectIntervalMs = 3600000;
+constexpr size_t kMaxRtspUrlChars = 2048;
 
 Status ValidateTimeouts(int start_ms, int receive_ms, const std::string& what) {
   if (start_ms < 0 || receive_ms < 0) {
@@ -53,6 +62,115 @@ Status ValidateRtspPath(const std::string& path) {
                                 "' is not a path: 1 to 256 of [A-Za-z0-9._-/], no leading '/'");
   }
   return Status::Ok();
+}
+
+// The URL with any user:password@ replaced by ***@, for messages.
+std::string RedactUrl(const std::string& url) {
+  const size_t scheme_end = url.find("://");
+  if (scheme_end == std::string::npos) return url;
+  const size_t auth = scheme_end + 3;
+  const size_t auth_end = std::min(url.find_first_of("/?#", auth), url.size());
+  const size_t at = url.rfind('@', auth_end == 0 ? 0 : auth_end - 1);
+  if (at == std::string::npos || at < auth) return url;
+  return url.substr(0, auth) + "***" + url.substr(at);
+}
+
+// rtsp:// or rtsps:// with a host (a name, an IPv4 address or a bracketed
+// IPv6 address) and an optional port; no spaces or control characters.
+Status ValidateRtspUrl(const std::string& url) {
+  auto bad = [&](const std::string& why) {
+    return InvalidArgumentError("rtsp_pull.url '" + RedactUrl(url) + "' " + why +
+                                "; want rtsp://[user:password@]host[:port]/path or rtsps://...");
+  };
+  if (url.empty()) return InvalidArgumentError("rtsp_pull.url is required, e.g. rtsp://cam:554/1");
+  if (url.size() > kMaxRtspUrlChars) return bad("is longer than 2048 characters");
+  for (char c : url) {
+    if (static_cast<unsigned char>(c) <= 0x20 || c == 0x7f) {
+      return bad("contains a space or control character");
+    }
+  }
+  const size_t scheme_end = url.find("://");
+  std::string scheme = scheme_end == std::string::npos ? "" : url.substr(0, scheme_end);
+  for (char& c : scheme) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  if (scheme != "rtsp" && scheme != "rtsps") return bad("does not start with rtsp:// or rtsps://");
+  const size_t auth = scheme_end + 3;
+  const size_t auth_end = std::min(url.find_first_of("/?#", auth), url.size());
+  std::string hostport = url.substr(auth, auth_end - auth);
+  const size_t at = hostport.rfind('@');
+  if (at != std::string::npos) hostport = hostport.substr(at + 1);
+  std::string host, port;
+  if (!hostport.empty() && hostport[0] == '[') {
+    const size_t close = hostport.find(']');
+    if (close == std::string::npos) return bad("has an IPv6 host without its closing ']'");
+    host = hostport.substr(1, close - 1);
+    const std::string rest = hostport.substr(close + 1);
+    if (!rest.empty() && rest[0] != ':') return bad("has characters after the IPv6 host");
+    if (!rest.empty()) port = rest.substr(1);
+    for (char c : host) {
+      if (!std::isxdigit(static_cast<unsigned char>(c)) && c != ':' && c != '.') {
+        return bad("has an IPv6 host with characters other than hex digits, ':' and '.'");
+      }
+    }
+  } else {
+    const size_t colon = hostport.find(':');
+    host = hostport.substr(0, colon);
+    if (colon != std::string::npos) port = hostport.substr(colon + 1);
+    for (char c : host) {
+      if (!std::isalnum(static_cast<unsigned char>(c)) && c != '.' && c != '-' && c != '_') {
+        return bad("has a host with characters other than letters, digits, '.', '-' and '_'");
+      }
+    }
+  }
+  if (host.empty()) return bad("has no host");
+  if (!port.empty() || hostport.back() == ':') {
+    bool digits = !port.empty() && port.size() <= 5;
+    for (char c : port) digits = digits && std::isdigit(static_cast<unsigned char>(c));
+    const long n = digits ? std::strtol(port.c_str(), nullptr, 10) : 0;
+    if (n < 1 || n > 65535) return bad("has a port that is not 1..65535");
+  }
+  return Status::Ok();
+}
+
+Status ValidateReconnectPolicy(const v1::ReconnectPolicy& p) {
+  auto bad = [](const std::string& why) {
+    return InvalidArgumentError("rtsp_pull.reconnect." + why);
+  };
+  if (p.max_attempts() < 0 || p.max_attempts() > kMaxReconnectAttempts) {
+    return bad("max_attempts must be in [0, 1000000] (0 = no reconnect), got " +
+               std::to_string(p.max_attempts()));
+  }
+  if (p.initial_interval_ms() < 0 || p.initial_interval_ms() > kMaxReconnectIntervalMs) {
+    return bad("initial_interval_ms must be in [0, 3600000] ms (0 = 1000), got " +
+               std::to_string(p.initial_interval_ms()));
+  }
+  if (p.max_interval_ms() < 0 || p.max_interval_ms() > kMaxReconnectIntervalMs) {
+    return bad("max_interval_ms must be in [0, 3600000] ms (0 = 30000), got " +
+               std::to_string(p.max_interval_ms()));
+  }
+  const double m = p.backoff_multiplier();
+  if (!Finite(m) || (m != 0 && (m < 1 || m > 100))) {
+    return bad("backoff_multiplier must be in [1, 100] (0 = 2), got " + std::to_string(m));
+  }
+  if (p.max_interval_ms() > 0 && p.max_interval_ms() < p.initial_interval_ms()) {
+    return bad("max_interval_ms (" + std::to_string(p.max_interval_ms()) +
+               ") must be >= initial_interval_ms (" + std::to_string(p.initial_interval_ms()) +
+               ")");
+  }
+  return Status::Ok();
+}
+
+// The wait before retry `attempt` (1, 2, ...) of an outage, ms.
+int ReconnectDelayMs(const v1::ReconnectPolicy& p, int attempt) {
+  const double initial =
+      p.initial_interval_ms() > 0 ? p.initial_interval_ms() : kDefaultReconnectIntervalMs;
+  const double factor =
+      p.backoff_multiplier() > 0 ? p.backoff_multiplier() : kDefaultBackoffMultiplier;
+  const double cap = p.max_interval_ms() > 0
+                         ? p.max_interval_ms()
+                         : std::max<double>(kDefaultMaxReconnectIntervalMs, initial);
+  double delay = initial;
+  for (int k = 1; k < attempt && delay < cap; ++k) delay *= factor;
+  return static_cast<int>(std::min(delay, cap));
 }
 
 // A light syntax check (RFC 4566): "v=0" first, every line "<letter>=...",
@@ -113,8 +231,11 @@ Status ValidateRequest(const v1::Session& r) {
     case v1::Session::kUpload:
       break;
     case v1::Session::kRtspPull:
-      return UnimplementedError(
-          "RTSP pull sources are not served yet; use rtsp_push, rtp_sdp or upload");
+      SLAPSE_RETURN_IF_ERROR(ValidateRtspUrl(r.rtsp_pull().url()));
+      SLAPSE_RETURN_IF_ERROR(ValidateReconnectPolicy(r.rtsp_pull().reconnect()));
+      SLAPSE_RETURN_IF_ERROR(ValidateTimeouts(r.rtsp_pull().start_timeout_ms(),
+                                              r.rtsp_pull().receive_timeout_ms(), "rtsp_pull"));
+      break;
     case v1::Session::kRtspPush:
       SLAPSE_RETURN_IF_ERROR(ValidateRtspPath(r.rtsp_push().path()));
       SLAPSE_RETURN_IF_ERROR(ValidateTimeouts(r.rtsp_push().start_timeout_ms(),
@@ -233,6 +354,7 @@ struct SessionManager::Session {
   std::shared_ptr<EventLog> events;  // shared with watchers
   std::shared_ptr<UploadQueue> upload;
   std::atomic<bool> stop{false};
+  std::condition_variable stop_cv;  // with `mu`: wakes a reconnect wait on stop
 
   mutable std::mutex mu;  // guards everything below
   v1::Session proto;      // state, stats, error, times (last_sequence filled on read)
@@ -264,6 +386,11 @@ struct SessionManager::Session {
                    : why);
     }
     return true;
+  }
+  // Waits up to `ms` or until the session is asked to stop; true if it was.
+  bool WaitForStop(int ms) {
+    std::unique_lock<std::mutex> lock(mu);
+    return stop_cv.wait_for(lock, std::chrono::milliseconds(ms), [this] { return stop.load(); });
   }
   bool Transition(v1::Session::State state, const Status& why, const std::string& message = "") {
     std::lock_guard<std::mutex> lock(mu);
@@ -394,7 +521,10 @@ StatusOr<v1::ListSessionsResponse> SessionManager::List(
 
 void SessionManager::StopSession(Session* s, const std::string& why) {
   s->stop = true;
+  // Transition takes `mu`, so a reconnect wait either saw `stop` or is
+  // blocked in wait_for and gets the notification.
   s->Transition(v1::Session::STOPPED, Status::Ok(), why);
+  s->stop_cv.notify_all();
 }
 
 StatusOr<v1::Session> SessionManager::Stop(const std::string& name) {
@@ -544,14 +674,22 @@ void SessionManager::RunSession(const std::shared_ptr<Session>& s) {
   if (s->stop) return end(CancelledError("stopped"));
 
   // Network sources are bounded by a deadline the interrupt callback checks:
-  // start_timeout_ms from now until the first frame, then receive_timeout_ms
-  // per Next() call (the time spent blocked in I/O, not in the pipeline).
+  // start_timeout_ms from now (RTSP pull: from each connection attempt) until
+  // the first frame, then receive_timeout_ms per Next() call (the time spent
+  // blocked in I/O, not in the pipeline).
   v1::Session::SourceCase source;
   int start_ms = 0, receive_ms = 0;
+  v1::ReconnectPolicy policy;  // RTSP pull
+  std::string pull_url;        // RTSP pull, without credentials
   {
     std::lock_guard<std::mutex> lock(s->mu);
     source = s->proto.source_case();
-    if (source == v1::Session::kRtspPush) {
+    if (source == v1::Session::kRtspPull) {
+      start_ms = s->proto.rtsp_pull().start_timeout_ms();
+      receive_ms = s->proto.rtsp_pull().receive_timeout_ms();
+      policy = s->proto.rtsp_pull().reconnect();
+      pull_url = RedactUrl(s->proto.rtsp_pull().url());
+    } else if (source == v1::Session::kRtspPush) {
       start_ms = s->proto.rtsp_push().start_timeout_ms();
       receive_ms = s->proto.rtsp_push().receive_timeout_ms();
     } else if (source == v1::Session::kRtpSdp) {
@@ -595,131 +733,244 @@ void SessionManager::RunSession(const std::shared_ptr<Session>& s) {
     }
   };
   Session* raw = s.get();
-  auto reader = OpenReader(s, [raw, network, &deadline_ns, &timed_out, now_ns] {
+  auto interrupt = [raw, network, &deadline_ns, &timed_out, now_ns] {
     if (raw->stop.load()) return true;
     if (network && now_ns() > deadline_ns.load()) {
       timed_out = true;
       return true;
     }
     return false;
-  });
-  if (!reader.ok()) {
-    if (timed_out) return end_timed_out();
-    return end(reader.status());
-  }
-  const StreamInfo& info = (*reader)->info();
+  };
 
-  Intrinsics k;
-  v1::PipelineOptions popts;
-  {
-    std::lock_guard<std::mutex> lock(s->mu);
-    const v1::Intrinsics& pk = s->proto.intrinsics();
-    if ((pk.width_px() != 0 && pk.width_px() != info.width_px) ||
-        (pk.height_px() != 0 && pk.height_px() != info.height_px)) {
-      s->TransitionLocked(v1::Session::FAILED,
-                          InvalidArgumentError(
-                              "intrinsics are for " + std::to_string(pk.width_px()) + "x" +
-                              std::to_string(pk.height_px()) + " but the stream is " +
-                              std::to_string(info.width_px) + "x" + std::to_string(info.height_px)),
-                          "");
-      return;
-    }
-    k.fx_px = pk.fx_px();
-    k.fy_px = pk.fy_px();
-    k.cx_px = pk.cx_px();
-    k.cy_px = pk.cy_px();
-    k.width_px = info.width_px;
-    k.height_px = info.height_px;
-    popts = s->proto.pipeline_options();
-  }
-  Pipeline pipeline(k, info.mv_sigma_px(), ToPipelineOptions(popts));
-
-  const Clock::time_point start = Clock::now();
+  // One pass per connection: upload, RTSP push and RTP/SDP have one; RTSP
+  // pull reconnects on an outage while its policy allows (see RtspPull).
+  std::optional<Pipeline> pipeline;
+  StreamInfo first_info;
+  Clock::time_point start;    // when the pipeline was made
   std::set<int> live_planes;  // track ids the filter held after the previous step
   int64_t pairs = 0, tracked = 0;
-  FrameRecord frame;
-  Status status;
+  int64_t index_offset = 0;       // added to a connection's frame indices
+  double time_offset_s = 0.0;     // and to its timestamps
+  int64_t last_index = -1;        // of the last frame processed (offset)
+  double last_timestamp_s = 0.0;  // of the last frame processed (offset)
+  Clock::time_point last_frame_wall;
+  int attempt = 0;     // retries in the current outage
+  int reconnects = 0;  // retries over the session's life
   for (;;) {
-    if (frames > 0) deadline_ns = now_ns() + int64_t{receive_ms} * 1000000;
-    status = (*reader)->Next(&frame);
-    if (!status.ok()) break;
-    if (++frames == 1 && network) {
-      s->Transition(v1::Session::RUNNING, Status::Ok(), "receiving the stream");
-    }
-    auto step = pipeline.Push(frame);
-    if (!step.ok()) return end(step.status());
-    const double wall_s = std::chrono::duration<double>(Clock::now() - start).count();
-    std::vector<v1::SessionEvent> events;
-    {
-      std::lock_guard<std::mutex> lock(s->mu);
-      v1::SessionStats* st = s->proto.mutable_stats();
-      st->set_frames(frames);
-      st->set_fps(wall_s >= 0.25 ? frames / wall_s : 0.0);  // no figure from a blip
-      st->set_lag_ms(std::max(0.0, wall_s - frame.timestamp_s) * 1e3);
-      st->set_stream_time_s(frame.timestamp_s);
-      if (step->has_value()) {
-        const PipelineStep& ps = **step;
-        ++pairs;
-        tracked += ps.tracking;
-        st->set_anchor_pairs(pairs);
-        st->set_tracked_pairs(tracked);
-        st->set_planes(static_cast<int>(pipeline.plane_map().size()));
-        *s->proto.mutable_update_time() = TimeUtil::GetCurrentTime();
+    deadline_ns = now_ns() + int64_t{start_ms} * 1000000;
+    timed_out = false;
+    int64_t connection_frames = 0;
+    Status status;  // how this connection ended
+    auto reader = OpenReader(s, interrupt);
+    if (!reader.ok()) {
+      status = reader.status();
+      if (source != v1::Session::kRtspPull) {
+        if (timed_out) return end_timed_out();
+        return end(status);
+      }
+    } else {
+      const StreamInfo& info = (*reader)->info();
+      if (!pipeline.has_value()) {
+        Intrinsics k;
+        v1::PipelineOptions popts;
+        {
+          std::lock_guard<std::mutex> lock(s->mu);
+          const v1::Intrinsics& pk = s->proto.intrinsics();
+          if ((pk.width_px() != 0 && pk.width_px() != info.width_px) ||
+              (pk.height_px() != 0 && pk.height_px() != info.height_px)) {
+            s->TransitionLocked(
+                v1::Session::FAILED,
+                InvalidArgumentError("intrinsics are for " + std::to_string(pk.width_px()) + "x" +
+                                     std::to_string(pk.height_px()) + " but the stream is " +
+                                     std::to_string(info.width_px) + "x" +
+                                     std::to_string(info.height_px)),
+                "");
+            return;
+          }
+          k.fx_px = pk.fx_px();
+          k.fy_px = pk.fy_px();
+          k.cx_px = pk.cx_px();
+          k.cy_px = pk.cy_px();
+          k.width_px = info.width_px;
+          k.height_px = info.height_px;
+          popts = s->proto.pipeline_options();
+        }
+        pipeline.emplace(k, info.mv_sigma_px(), ToPipelineOptions(popts));
+        first_info = info;
+        start = Clock::now();
+      } else if (info.width_px != first_info.width_px || info.height_px != first_info.height_px ||
+                 info.codec_name != first_info.codec_name) {
+        return end(FailedPreconditionError(
+            "the stream changed across a reconnect from " + first_info.codec_name + " " +
+            std::to_string(first_info.width_px) + "x" + std::to_string(first_info.height_px) +
+            " to " + info.codec_name + " " + std::to_string(info.width_px) + "x" +
+            std::to_string(info.height_px) + "; create a new session for the new stream"));
+      } else {
+        // A new connection: its frames do not connect to the ones before.
+        pipeline->Break();
+      }
+      if (last_index >= 0) {
+        // The new connection's frames follow the old ones, the outage's wall
+        // time later (at least one frame interval).
+        const double gap_s =
+            std::max(std::chrono::duration<double>(Clock::now() - last_frame_wall).count(),
+                     info.fps > 0 ? 1.0 / info.fps : 1e-3);
+        index_offset = last_index + 1;
+        time_offset_s = last_timestamp_s + gap_s;
+      }
 
-        // Snapshots: a newly fixed scale rescales everything seen so far.
-        const auto& traj = pipeline.trajectory();
-        if (pipeline.metric() != s->metric) {
-          s->metric = pipeline.metric();
-          s->trajectory.clear();
-          s->planes.clear();
-          for (const auto& [id, mp] : pipeline.plane_map()) s->planes[id] = ToPlane(mp);
+      FrameRecord frame;
+      for (;;) {
+        if (connection_frames > 0) deadline_ns = now_ns() + int64_t{receive_ms} * 1000000;
+        status = (*reader)->Next(&frame);
+        if (!status.ok()) break;
+        ++connection_frames;
+        if (++frames == 1 && network) {
+          s->Transition(v1::Session::RUNNING, Status::Ok(), "receiving the stream");
         }
-        for (size_t i = s->trajectory.size(); i < traj.size(); ++i) {
-          v1::Trajectory::Point p;
-          p.set_anchor_index(traj[i].index);
-          p.set_timestamp_s(traj[i].timestamp_s);
-          SetPose(traj[i].world_from_cam, p.mutable_world_from_cam());
-          s->trajectory.push_back(std::move(p));
-        }
+        attempt = 0;  // frames flow: an outage is over
+        frame.index += index_offset;
+        if (frame.prev_anchor_index >= 0) frame.prev_anchor_index += index_offset;
+        if (frame.next_anchor_index >= 0) frame.next_anchor_index += index_offset;
+        if (frame.coded_index >= 0) frame.coded_index += index_offset;
+        frame.timestamp_s += time_offset_s;
+        last_index = frame.index;
+        last_timestamp_s = frame.timestamp_s;
+        last_frame_wall = Clock::now();
+        auto step = pipeline->Push(frame);
+        if (!step.ok()) return end(step.status());
+        const double wall_s = std::chrono::duration<double>(Clock::now() - start).count();
+        std::vector<v1::SessionEvent> events;
+        {
+          std::lock_guard<std::mutex> lock(s->mu);
+          v1::SessionStats* st = s->proto.mutable_stats();
+          st->set_frames(frames);
+          st->set_fps(wall_s >= 0.25 ? frames / wall_s : 0.0);  // no figure from a blip
+          st->set_lag_ms(std::max(0.0, wall_s - frame.timestamp_s) * 1e3);
+          st->set_stream_time_s(frame.timestamp_s);
+          if (step->has_value()) {
+            const PipelineStep& ps = **step;
+            ++pairs;
+            tracked += ps.tracking;
+            st->set_anchor_pairs(pairs);
+            st->set_tracked_pairs(tracked);
+            st->set_planes(static_cast<int>(pipeline->plane_map().size()));
+            *s->proto.mutable_update_time() = TimeUtil::GetCurrentTime();
 
-        v1::SessionEvent pose;
-        v1::PoseUpdate* pu = pose.mutable_pose();
-        pu->set_anchor_index(ps.later_index);
-        pu->set_timestamp_s(ps.timestamp_s);
-        SetPose(ps.world_from_cam, pu->mutable_world_from_cam());
-        pu->set_tracking(ps.tracking);
-        pu->set_metric(ps.metric);
-        pu->set_note(ps.note);
-        events.push_back(std::move(pose));
+            // Snapshots: a newly fixed scale rescales everything seen so far.
+            const auto& traj = pipeline->trajectory();
+            if (pipeline->metric() != s->metric) {
+              s->metric = pipeline->metric();
+              s->trajectory.clear();
+              s->planes.clear();
+              for (const auto& [id, mp] : pipeline->plane_map()) s->planes[id] = ToPlane(mp);
+            }
+            for (size_t i = s->trajectory.size(); i < traj.size(); ++i) {
+              v1::Trajectory::Point p;
+              p.set_anchor_index(traj[i].index);
+              p.set_timestamp_s(traj[i].timestamp_s);
+              SetPose(traj[i].world_from_cam, p.mutable_world_from_cam());
+              s->trajectory.push_back(std::move(p));
+            }
 
-        std::set<int> now;
-        for (const PlaneTrack& t : ps.planes) now.insert(t.track_id);
-        auto plane_event = [&](int id, v1::PlaneEvent::Kind kind) {
-          auto it = pipeline.plane_map().find(id);
-          if (it == pipeline.plane_map().end()) return;
-          s->planes[id] = ToPlane(it->second);
-          v1::SessionEvent e;
-          v1::PlaneEvent* pe = e.mutable_plane();
-          pe->set_kind(kind);
-          pe->set_track_id(id);
-          SetVec(it->second.normal_world, pe->mutable_normal_world());
-          pe->set_distance(it->second.distance_m);
-          pe->set_anchor_index(ps.later_index);
-          events.push_back(std::move(e));
-        };
-        for (int id : now) {
-          plane_event(id, live_planes.count(id) ? v1::PlaneEvent::UPDATED : v1::PlaneEvent::ADDED);
+            v1::SessionEvent pose;
+            v1::PoseUpdate* pu = pose.mutable_pose();
+            pu->set_anchor_index(ps.later_index);
+            pu->set_timestamp_s(ps.timestamp_s);
+            SetPose(ps.world_from_cam, pu->mutable_world_from_cam());
+            pu->set_tracking(ps.tracking);
+            pu->set_metric(ps.metric);
+            pu->set_note(ps.note);
+            events.push_back(std::move(pose));
+
+            std::set<int> now;
+            for (const PlaneTrack& t : ps.planes) now.insert(t.track_id);
+            auto plane_event = [&](int id, v1::PlaneEvent::Kind kind) {
+              auto it = pipeline->plane_map().find(id);
+              if (it == pipeline->plane_map().end()) return;
+              s->planes[id] = ToPlane(it->second);
+              v1::SessionEvent e;
+              v1::PlaneEvent* pe = e.mutable_plane();
+              pe->set_kind(kind);
+              pe->set_track_id(id);
+              SetVec(it->second.normal_world, pe->mutable_normal_world());
+              pe->set_distance(it->second.distance_m);
+              pe->set_anchor_index(ps.later_index);
+              events.push_back(std::move(e));
+            };
+            for (int id : now) {
+              plane_event(id,
+                          live_planes.count(id) ? v1::PlaneEvent::UPDATED : v1::PlaneEvent::ADDED);
+            }
+            for (int id : live_planes) {
+              if (!now.count(id)) plane_event(id, v1::PlaneEvent::REMOVED);
+            }
+            live_planes = std::move(now);
+          }
         }
-        for (int id : live_planes) {
-          if (!now.count(id)) plane_event(id, v1::PlaneEvent::REMOVED);
-        }
-        live_planes = std::move(now);
+        for (auto& e : events) s->events->Append(std::move(e));
+      }
+      if (source != v1::Session::kRtspPull) {
+        if (timed_out && status.code() == StatusCode::kCancelled) return end_timed_out();
+        return end(status);
       }
     }
-    for (auto& e : events) s->events->Append(std::move(e));
+
+    // RTSP pull: the connection ended or could not be made.
+    if (s->stop) return end(CancelledError("stopped"));
+    if (status.code() == StatusCode::kFailedPrecondition) return end(status);  // unusable stream
+    std::string reason;
+    if (timed_out && connection_frames == 0) {
+      reason = "no video within start_timeout_ms=" + std::to_string(start_ms) + " of connecting";
+    } else if (timed_out) {
+      reason = "no video for receive_timeout_ms=" + std::to_string(receive_ms) + " after " +
+               std::to_string(connection_frames) + " frames";
+    } else if (status.code() == StatusCode::kOutOfRange) {
+      reason = "the stream ended (end of file: RTCP BYE or a closed connection) after " +
+               std::to_string(connection_frames) + " frames";
+    } else {
+      reason = status.message();
+    }
+    if (attempt >= policy.max_attempts()) {
+      std::lock_guard<std::mutex> lock(s->mu);
+      if (s->stop) {
+        s->TransitionLocked(v1::Session::STOPPED, Status::Ok(), "stopped");
+      } else if (policy.max_attempts() == 0 && connection_frames > 0 && !timed_out &&
+                 status.code() == StatusCode::kOutOfRange) {
+        s->TransitionLocked(v1::Session::FINISHED, Status::Ok(),
+                            reason + "; no reconnect (reconnect.max_attempts is 0)");
+      } else if (policy.max_attempts() == 0) {
+        s->TransitionLocked(v1::Session::FAILED,
+                            UnavailableError("rtsp_pull '" + pull_url + "': " + reason +
+                                             " (no reconnect: reconnect.max_attempts is 0)"),
+                            "");
+      } else {
+        s->TransitionLocked(v1::Session::FAILED,
+                            UnavailableError("rtsp_pull '" + pull_url + "': gave up after " +
+                                             std::to_string(attempt) +
+                                             " reconnect attempt(s); last error: " + reason),
+                            "");
+      }
+      return;
+    }
+    ++attempt;
+    ++reconnects;
+    const int delay_ms = ReconnectDelayMs(policy, attempt);
+    {
+      std::lock_guard<std::mutex> lock(s->mu);
+      s->proto.mutable_stats()->set_reconnects(reconnects);
+      *s->proto.mutable_update_time() = TimeUtil::GetCurrentTime();
+    }
+    v1::SessionEvent e;
+    v1::Reconnecting* r = e.mutable_reconnecting();
+    r->set_attempt(attempt);
+    r->set_max_attempts(policy.max_attempts());
+    r->set_delay_ms(delay_ms);
+    r->set_reason(reason);
+    s->events->Append(std::move(e));
+    if (reader.ok()) reader->reset();  // close the old connection before waiting
+    if (s->WaitForStop(delay_ms)) return end(CancelledError("stopped"));
   }
-  if (timed_out && status.code() == StatusCode::kCancelled) return end_timed_out();
-  end(status);
 }
 
 StatusOr<std::unique_ptr<MvReader>> SessionManager::OpenReader(const std::shared_ptr<Session>& s,
@@ -728,6 +979,29 @@ StatusOr<std::unique_ptr<MvReader>> SessionManager::OpenReader(const std::shared
   o.interrupt = std::move(interrupt);
   const v1::Session req = s->Snapshot();
   switch (req.source_case()) {
+    case v1::Session::kRtspPull: {
+      // FFmpeg's RTSP client: DESCRIBE / SETUP / PLAY with RTP interleaved on
+      // the TCP connection. "timeout" is its socket I/O timeout (connect and
+      // reads) in microseconds; the interrupt callback bounds the rest.
+      const std::string& url = req.rtsp_pull().url();
+      const int receive_ms = req.rtsp_pull().receive_timeout_ms() > 0
+                                 ? req.rtsp_pull().receive_timeout_ms()
+                                 : kDefaultReceiveTimeoutMs;
+      o.format = "rtsp";
+      o.format_options = {{"rtsp_transport", "tcp"},
+                          {"allowed_media_types", "video"},
+                          {"timeout", std::to_string(int64_t{receive_ms} * 1000)}};
+      auto reader = MvReader::Open(url, o);
+      if (reader.ok()) return reader;
+      // FFmpeg's messages quote the URL: drop its credentials.
+      std::string message = reader.status().message();
+      const std::string shown = RedactUrl(url);
+      for (size_t at = message.find(url); at != std::string::npos;
+           at = message.find(url, at + shown.size())) {
+        message.replace(at, url.size(), shown);
+      }
+      return Status(reader.status().code(), message);
+    }
     case v1::Session::kRtspPush: {
       // FFmpeg's RTSP demuxer in listen mode: accepts one publisher, answers
       // its ANNOUNCE / SETUP / RECORD, then reads its RTP (TCP interleaved

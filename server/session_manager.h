@@ -52,9 +52,9 @@ class SessionManager {
   SessionManager& operator=(const SessionManager&) = delete;
 
   // Validates and starts a session from `request` (source, intrinsics,
-  // pipeline options). INVALID_ARGUMENT (also a bad RTSP push path or SDP),
-  // UNIMPLEMENTED (RTSP pull), RESOURCE_EXHAUSTED (at capacity) or
-  // UNAVAILABLE (shutting down, or no free port for an RTSP listener).
+  // pipeline options). INVALID_ARGUMENT (also a bad RTSP pull URL or
+  // reconnect policy, RTSP push path or SDP), RESOURCE_EXHAUSTED (at capacity)
+  // or UNAVAILABLE (shutting down, or no free port for an RTSP listener).
   StatusOr<v1::Session> Create(const v1::Session& request);
   StatusOr<v1::Session> Get(const std::string& name) const;
   // Sessions in creation order from `page_token`; see ListSessionsRequest.
@@ -88,7 +88,8 @@ class SessionManager {
   StatusOr<std::shared_ptr<Session>> Find(const std::string& name) const;
   void WorkerLoop();
   void RunSession(const std::shared_ptr<Session>& session);
-  // Opens the session's reader for its source; `interrupt` aborts blocking I/O.
+  // Opens the session's reader for its source (RTSP pull: one connection
+  // attempt); `interrupt` aborts blocking I/O.
   StatusOr<std::unique_ptr<MvReader>> OpenReader(const std::shared_ptr<Session>& session,
                                                  std::function<bool()> interrupt);
   int ActiveCountLocked() const;

@@ -513,9 +513,6 @@ TEST_F(ServerTest, BadIntrinsicsAreInvalidArgument) {
   request.mutable_intrinsics()->set_fx_px(-1);
   auto created = client_->CreateSession(request);
   EXPECT_EQ(created.status().code(), StatusCode::kInvalidArgument);
-  request = UploadRequest();
-  request.mutable_rtsp_pull()->set_url("rtsp://camera/1");
-  EXPECT_EQ(client_->CreateSession(request).status().code(), StatusCode::kUnimplemented);
 }
 
 TEST_F(ServerTest, HevcUploadFailsWithFailedPreconditionAndServerKeepsServing) {

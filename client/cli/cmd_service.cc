@@ -123,23 +123,33 @@ int RunServe(int argc, char** argv) {
 int RunCreate(int argc, char** argv) {
   Flags flags(
       "create",
-      "--upload|--rtsp-push PATH|--rtp-sdp FILE --intrinsics SPEC [options]\n"
+      "--upload|--rtsp-pull URL|--rtsp-push PATH|--rtp-sdp FILE --intrinsics SPEC [options]\n"
       "  (prints the session name; for --rtsp-push also the URL to publish to)",
       {kServerFlag,
        {"upload", "", "the stream comes through 'slapse upload'", ""},
+       {"rtsp-pull", "URL", "the server pulls rtsp[s]://[user:pass@]host[:port]/path (over TCP)",
+        ""},
        {"rtsp-push", "PATH", "a camera publishes (RTSP ANNOUNCE/RECORD) to the printed URL", ""},
        {"rtp-sdp", "FILE", "the server receives the RTP that this SDP file describes", ""},
        {"start-timeout-ms", "MS", "network sources: wait for the first frame (0: 60000)", "0"},
        {"receive-timeout-ms", "MS", "network sources: wait between frames (0: 5000)", "0"},
+       {"reconnect-attempts", "N",
+        "--rtsp-pull: retries per outage (drop, end, unreachable; 0: none)", "0"},
+       {"reconnect-interval-ms", "MS", "--rtsp-pull: wait before the first retry (0: 1000)", "0"},
+       {"reconnect-backoff", "X", "--rtsp-pull: each further wait is X times longer (0: 2)", "0"},
+       {"reconnect-max-interval-ms", "MS", "--rtsp-pull: longest wait (0: 30000)", "0"},
        {"intrinsics", "SPEC", "FILE.json or 'fx,fy,cx,cy' (pixels)", ""},
        {"eps-h", "PX", "homography inlier threshold (0: default)", "0"},
        {"first-step-m", "M", "metric scale: length of the first tracked step", ""},
        {"speed-kmh", "V", "metric scale: speed at the start", ""},
        {"camera-height-m", "H", "metric scale: camera height above the road", ""}});
   if (int rc = ParseOrExit(flags, "create", argc, argv, 0); rc >= 0) return rc;
-  const int sources = flags.GetBool("upload") + flags.Has("rtsp-push") + flags.Has("rtp-sdp");
+  const int sources = flags.GetBool("upload") + flags.Has("rtsp-pull") + flags.Has("rtsp-push") +
+                      flags.Has("rtp-sdp");
   if (sources != 1) {
-    return Fail("create", "give one source: --upload, --rtsp-push PATH or --rtp-sdp FILE", 2);
+    return Fail("create",
+                "give one source: --upload, --rtsp-pull URL, --rtsp-push PATH or --rtp-sdp FILE",
+                2);
   }
   auto start_ms = flags.GetInt("start-timeout-ms", 0, 3600000);
   auto receive_ms = flags.GetInt("receive-timeout-ms", 0, 3600000);
@@ -155,7 +165,25 @@ int RunCreate(int argc, char** argv) {
                                : ParseIntrinsicsSpec(spec, 0, 0);
   if (!k.ok()) return Fail("create", k.status().message(), 2);
   v1::Session request;
-  if (flags.Has("rtsp-push")) {
+  if (flags.Has("rtsp-pull")) {
+    // Ranges are the server's (it answers INVALID_ARGUMENT with the reason).
+    auto attempts = flags.GetInt("reconnect-attempts", 0, INT32_MAX);
+    auto interval = flags.GetInt("reconnect-interval-ms", 0, INT32_MAX);
+    auto backoff = flags.GetDouble("reconnect-backoff", 0, 1e9);
+    auto max_interval = flags.GetInt("reconnect-max-interval-ms", 0, INT32_MAX);
+    for (const Status* s :
+         {&attempts.status(), &interval.status(), &backoff.status(), &max_interval.status()}) {
+      if (!s->ok()) return Fail("create", s->message(), 2);
+    }
+    v1::RtspPull* pull = request.mutable_rtsp_pull();
+    pull->set_url(flags.GetString("rtsp-pull"));
+    pull->set_start_timeout_ms(static_cast<int>(*start_ms));
+    pull->set_receive_timeout_ms(static_cast<int>(*receive_ms));
+    pull->mutable_reconnect()->set_max_attempts(static_cast<int>(*attempts));
+    pull->mutable_reconnect()->set_initial_interval_ms(static_cast<int>(*interval));
+    pull->mutable_reconnect()->set_backoff_multiplier(*backoff);
+    pull->mutable_reconnect()->set_max_interval_ms(static_cast<int>(*max_interval));
+  } else if (flags.Has("rtsp-push")) {
     request.mutable_rtsp_push()->set_path(flags.GetString("rtsp-push"));
     request.mutable_rtsp_push()->set_start_timeout_ms(static_cast<int>(*start_ms));
     request.mutable_rtsp_push()->set_receive_timeout_ms(static_cast<int>(*receive_ms));
@@ -250,6 +278,11 @@ int RunWatch(int argc, char** argv) {
                       v1::PlaneEvent::Kind_Name(p.kind()).c_str(), p.track_id(),
                       p.normal_world().x(), p.normal_world().y(), p.normal_world().z(),
                       p.distance());
+        } else if (e.has_reconnecting()) {
+          const v1::Reconnecting& r = e.reconnecting();
+          std::printf("%6llu reconnecting (attempt %d of %d) in %d ms: %s\n",
+                      static_cast<unsigned long long>(e.sequence()), r.attempt(), r.max_attempts(),
+                      r.delay_ms(), r.reason().c_str());
         } else if (e.has_state_change()) {
           std::printf("%6llu state  %s  %s\n", static_cast<unsigned long long>(e.sequence()),
                       StateName(e.state_change().state()), e.state_change().message().c_str());

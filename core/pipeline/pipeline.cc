@@ -37,6 +37,12 @@ StatusOr<std::optional<PipelineStep>> Pipeline::Push(const FrameRecord& frame) {
   return std::optional<PipelineStep>(std::move(step));
 }
 
+void Pipeline::Break() {
+  merger_.Reset();
+  extractor_.Reset();
+  ekf_ = PlaneEkf(intrinsics_, options_.ekf);
+}
+
 PipelineStep Pipeline::Process(const AnchorPair& pair) {
   PipelineStep step;
   step.earlier_index = pair.earlier_index;

@@ -97,6 +97,14 @@ class Pipeline {
   // that cannot be used yields a step with tracking = false and a note.
   StatusOr<std::optional<PipelineStep>> Push(const FrameRecord& frame);
 
+  // The stream broke off (e.g. a network source reconnected): the frames
+  // pushed next do not connect to those before. Drops the open GOP segment,
+  // the remembered planes and the filter; the trajectory, plane map and scale
+  // stay. The filter re-initialises on the next usable pair from the last
+  // pose, with the last step's length as scale (as after a filter reset).
+  // Later frames still need larger indices and timestamps.
+  void Break();
+
   struct TrajectoryPoint {
     int64_t index;
     double timestamp_s;
