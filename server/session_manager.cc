@@ -845,7 +845,8 @@ void SessionManager::RunSession(const std::shared_ptr<Session>& s) {
           std::lock_guard<std::mutex> lock(s->mu);
           v1::SessionStats* st = s->proto.mutable_stats();
           st->set_frames(frames);
-          st->set_fps(wall_s >= 0.25 ? frames / wall_s : 0.0);  // no figure from a blip
+          // No figure from a blip: 0 until 10 frames or 0.25 s.
+          st->set_fps(wall_s > 0 && (frames >= 10 || wall_s >= 0.25) ? frames / wall_s : 0.0);
           st->set_lag_ms(std::max(0.0, wall_s - frame.timestamp_s) * 1e3);
           st->set_stream_time_s(frame.timestamp_s);
           if (step->has_value()) {
