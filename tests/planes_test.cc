@@ -686,6 +686,53 @@ TEST(PlaneExtractorTest, TakenOverTrackIsLostNotHijacked) {
   EXPECT_GE(band_2_mbs, 387);  // 13 columns = 390 MBs; noise beyond 1 px is rare
 }
 
+// Motion-constrained tracking: between the pairs, the building on the right
+// is replaced by one set 3 m further back, on the same MBs. Its plane moves
+// with the pair's motion no longer (track_change ~ 0.4): the track is lost
+// and the surface comes back as a new plane, while road and left facade
+// continue with a small track_change. Without the gate the track would
+// silently jump to the other building's depth.
+TEST(PlaneExtractorTest, MotionConstrainedTrackIsLostWhenItsMbsShowAnotherSurface) {
+  SceneNoise noise1, noise2;
+  noise1.seed = 8;
+  noise2.seed = 9;
+  std::vector<ScenePlane> setback = Street();
+  ASSERT_EQ(setback[2].label, kRightFacade);
+  setback[2].d = 8.0;
+  const SyntheticPair s1 = MakePair(Frame0(), Frame1(), 0, noise1);
+  const SyntheticPair s2 = MakePair(Frame1(), Frame2(), 1, noise2, setback);
+  for (double max_change : {0.25, 1e9}) {
+    PlaneExtractionOptions options;
+    options.max_track_change = max_change;
+    PlaneExtractor extractor(options);
+    const PlaneExtractionResult r1 = ExtractPlanes(&extractor, s1, nullptr, /*with_motion=*/true);
+    ASSERT_EQ(r1.planes.size(), 3u);
+    std::map<int, int> track_of_label;
+    for (const ExtractedPlane& p : r1.planes) track_of_label[DominantLabel(p, s1)] = p.track_id;
+    const PlaneExtractionResult r2 = ExtractPlanes(&extractor, s2, nullptr, /*with_motion=*/true);
+    std::map<int, const ExtractedPlane*> plane_of_label;
+    for (const ExtractedPlane& p : r2.planes) plane_of_label[DominantLabel(p, s2)] = &p;
+    for (int label : {kRoad, kLeftFacade}) {
+      ASSERT_TRUE(plane_of_label.count(label)) << label;
+      EXPECT_TRUE(plane_of_label[label]->tracked) << label;
+      EXPECT_EQ(plane_of_label[label]->track_id, track_of_label[label]) << label;
+      EXPECT_GE(plane_of_label[label]->track_change, 0.0) << label;
+      EXPECT_LT(plane_of_label[label]->track_change, 0.1) << label;
+    }
+    ASSERT_TRUE(plane_of_label.count(kRightFacade));
+    const ExtractedPlane& right = *plane_of_label[kRightFacade];
+    if (max_change < 1) {
+      EXPECT_EQ(r2.num_tracks_lost, 1);
+      EXPECT_FALSE(right.tracked);
+      EXPECT_EQ(right.track_id, 3);  // the next new id
+    } else {
+      EXPECT_TRUE(right.tracked);
+      EXPECT_EQ(right.track_id, track_of_label[kRightFacade]);
+      EXPECT_GT(right.track_change, 0.25);
+    }
+  }
+}
+
 // Noise-free correspondences on MB cells `cells` (row-major indices of the
 // 40x30 grid) that move with homography H: x_earlier = dehom(H x_later).
 void AddPatch(const Eigen::Matrix3d& H, const std::vector<int>& cells, AnchorPair* pair) {

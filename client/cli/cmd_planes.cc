@@ -143,7 +143,7 @@ int RunEvalPlanes(int argc, char** argv) {
     if (!csv) return Fail("eval-planes", "cannot write " + flags.GetString("planes-csv"));
     std::fprintf(csv.get(),
                  "drive,later_index,track_id,tracked,mbs,mean_mb_row,gt_plane,gt_kind,purity,"
-                 "mixed_share,transfer_px,true_positive,rms_transfer_px\n");
+                 "mixed_share,transfer_px,true_positive,rms_transfer_px,track_change\n");
   }
   std::vector<std::string> dirs;
   for (double seed : *seeds) {

@@ -78,12 +78,13 @@ StatusOr<ExtractionStats> EvaluateExtraction(const std::string& drive_dir,
         double mean_row = 0;
         for (int mb : p.mb_indices) mean_row += mb / pair->mb_cols;
         mean_row /= std::max<size_t>(1, p.mb_indices.size());
-        std::fprintf(options.planes_csv, "%s,%lld,%d,%d,%zu,%.1f,%d,%s,%.3f,%.3f,%.3f,%d,%.3f\n",
+        std::fprintf(options.planes_csv,
+                     "%s,%lld,%d,%d,%zu,%.1f,%d,%s,%.3f,%.3f,%.3f,%d,%.3f,%.3f\n",
                      drive_dir.c_str(), static_cast<long long>(pair->later_index), m.track_id,
                      p.tracked ? 1 : 0, p.mb_indices.size(), mean_row, m.gt_plane,
                      m.gt_plane >= 0 ? PlaneKindName(gt->planes[m.gt_plane].kind) : "none",
                      m.purity, m.mixed_share, m.transfer_px, m.true_positive ? 1 : 0,
-                     p.rms_transfer_px);
+                     p.rms_transfer_px, p.track_change);
       }
     }
     ++stats.pairs;

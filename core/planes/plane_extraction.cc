@@ -4,6 +4,7 @@
 #include <cmath>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <utility>
 
@@ -125,18 +126,24 @@ int CountSet(const std::vector<char>& mask) {
   return static_cast<int>(std::count(mask.begin(), mask.end(), 1));
 }
 
-// Plane hypotheses over a point set, reported as homographies H (x_earlier ~
-// H x_later), from either estimator.
+// A fitted plane: its homography x_earlier ~ H x_later and, from the
+// motion-constrained estimator, its m = n / d in the later camera frame.
+struct PlaneModel {
+  Eigen::Matrix3d H = Eigen::Matrix3d::Identity();
+  std::optional<Eigen::Vector3d> m_later;
+};
+
+// Plane hypotheses over a point set from either estimator.
 class PlaneFitter {
  public:
   virtual ~PlaneFitter() = default;
   virtual void SetPoints(const std::vector<Eigen::Vector2d>& x_later,
                          const std::vector<Eigen::Vector2d>& x_earlier) = 0;
-  virtual RansacReport<Eigen::Matrix3d> Ransac(const RansacOptions& options,
-                                               const std::vector<int>* subset) const = 0;
+  virtual RansacReport<PlaneModel> Ransac(const RansacOptions& options,
+                                          const std::vector<int>* subset) const = 0;
   // Least-squares fit to the points of `mask`, with the squared residuals of
   // all points; false when the points are degenerate.
-  virtual bool FitMasked(const std::vector<char>& mask, Eigen::Matrix3d* H,
+  virtual bool FitMasked(const std::vector<char>& mask, PlaneModel* model,
                          std::vector<double>* sq_residuals) const = 0;
   // Minimal sample size.
   virtual int MinSamples() const = 0;
@@ -148,26 +155,26 @@ class EstimatorPlaneFitter : public PlaneFitter {
   using X_t = typename Estimator::X_t;
   using M_t = typename Estimator::M_t;
   EstimatorPlaneFitter(std::function<std::vector<X_t>(const std::vector<Eigen::Vector2d>&)> prepare,
-                       std::function<Eigen::Matrix3d(const M_t&)> to_homography)
-      : prepare_(std::move(prepare)), to_homography_(std::move(to_homography)) {}
+                       std::function<PlaneModel(const M_t&)> to_plane)
+      : prepare_(std::move(prepare)), to_plane_(std::move(to_plane)) {}
 
   void SetPoints(const std::vector<Eigen::Vector2d>& x_later,
                  const std::vector<Eigen::Vector2d>& x_earlier) override {
     X_ = prepare_(x_later);
     Y_ = x_earlier;
   }
-  RansacReport<Eigen::Matrix3d> Ransac(const RansacOptions& options,
-                                       const std::vector<int>* subset) const override {
+  RansacReport<PlaneModel> Ransac(const RansacOptions& options,
+                                  const std::vector<int>* subset) const override {
     const RansacReport<M_t> report = slapse::Ransac<Estimator>(options).Estimate(X_, Y_, subset);
-    RansacReport<Eigen::Matrix3d> out;
+    RansacReport<PlaneModel> out;
     out.success = report.success;
     out.num_trials = report.num_trials;
     out.support = report.support;
     out.inlier_mask = report.inlier_mask;
-    if (report.success) out.model = to_homography_(report.model);
+    if (report.success) out.model = to_plane_(report.model);
     return out;
   }
-  bool FitMasked(const std::vector<char>& mask, Eigen::Matrix3d* H,
+  bool FitMasked(const std::vector<char>& mask, PlaneModel* model,
                  std::vector<double>* sq_residuals) const override {
     std::vector<X_t> fit_x;
     std::vector<Eigen::Vector2d> fit_y;
@@ -180,14 +187,14 @@ class EstimatorPlaneFitter : public PlaneFitter {
     Estimator::Estimate(fit_x, fit_y, &models);
     if (models.empty()) return false;
     Estimator::Residuals(X_, Y_, models[0], sq_residuals);
-    *H = to_homography_(models[0]);
+    *model = to_plane_(models[0]);
     return true;
   }
   int MinSamples() const override { return Estimator::kMinNumSamples; }
 
  private:
   std::function<std::vector<X_t>(const std::vector<Eigen::Vector2d>&)> prepare_;
-  std::function<Eigen::Matrix3d(const M_t&)> to_homography_;
+  std::function<PlaneModel(const M_t&)> to_plane_;
   std::vector<X_t> X_;
   std::vector<Eigen::Vector2d> Y_;
 };
@@ -196,7 +203,9 @@ std::unique_ptr<PlaneFitter> MakeFitter(const PairMotion* motion) {
   if (motion == nullptr) {
     return std::make_unique<EstimatorPlaneFitter<HomographyEstimator>>(
         [](const std::vector<Eigen::Vector2d>& x) { return x; },
-        [](const Eigen::Matrix3d& H) { return H; });
+        [](const Eigen::Matrix3d& H) {
+          return PlaneModel{H, std::nullopt};
+        });
   }
   const Intrinsics intrinsics = motion->intrinsics;
   const Rigid3d earlier_from_later = motion->later_from_earlier.Inverse();
@@ -205,7 +214,7 @@ std::unique_ptr<PlaneFitter> MakeFitter(const PairMotion* motion) {
         return EpipolarPlaneEstimator::Prepare(x, intrinsics, earlier_from_later);
       },
       [=](const Eigen::Vector3d& m) {
-        return EpipolarPlaneEstimator::Homography(m, intrinsics, earlier_from_later);
+        return PlaneModel{EpipolarPlaneEstimator::Homography(m, intrinsics, earlier_from_later), m};
       });
 }
 
@@ -260,8 +269,8 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
   ransac_options.max_num_trials = options_.max_trials_per_plane;
   uint64_t ransac_call = 0;
 
-  const std::unique_ptr<PlaneFitter> fitter =
-      MakeFitter(options_.use_motion && motion != nullptr ? motion : nullptr);
+  const PairMotion* used_motion = options_.use_motion ? motion : nullptr;
+  const std::unique_ptr<PlaneFitter> fitter = MakeFitter(used_motion);
   std::vector<Eigen::Vector2d> x_later, x_earlier;  // of `remaining`
   std::vector<int> mb_of;                           // of `remaining`
   // Runs RANSAC over `remaining` (local indices in `subset`).
@@ -278,9 +287,9 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
     ransac_options.seed = MixSeed(options_.seed, ransac_call++);
     return fitter->Ransac(ransac_options, subset);
   };
-  // A plane hypothesis over `remaining`: its homography and inlier mask.
+  // A plane hypothesis over `remaining`: its model and inlier mask.
   struct Consensus {
-    Eigen::Matrix3d H;
+    PlaneModel model;
     std::vector<char> mask;
   };
   const double max_sq_error = options_.eps_h_px * options_.eps_h_px;
@@ -297,20 +306,20 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
   };
   // Connectivity split and least-squares refits of a successful report (over
   // the `remaining` of the last run_ransac call).
-  auto post_process = [&](const RansacReport<Eigen::Matrix3d>& report) {
+  auto post_process = [&](const RansacReport<PlaneModel>& report) {
     Consensus best{report.model, largest_component(report.inlier_mask)};
     int best_count = CountSet(best.mask);
     std::vector<double> sq_residuals;
     for (int iter = 0; iter < options_.refit_iterations; ++iter) {
-      Eigen::Matrix3d H;
-      if (!fitter->FitMasked(best.mask, &H, &sq_residuals)) break;
+      PlaneModel model;
+      if (!fitter->FitMasked(best.mask, &model, &sq_residuals)) break;
       std::vector<char> mask(sq_residuals.size());
       for (size_t j = 0; j < mask.size(); ++j) mask[j] = sq_residuals[j] <= max_sq_error ? 1 : 0;
       mask = largest_component(mask);
       const int count = CountSet(mask);
       if (count < best_count) break;
       const bool stable = mask == best.mask;
-      best = {H, std::move(mask)};
+      best = {model, std::move(mask)};
       best_count = count;
       if (stable) break;
     }
@@ -321,7 +330,8 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
     ExtractedPlane plane;
     plane.track_id = track_id;
     plane.tracked = tracked;
-    plane.H_earlier_from_later = consensus.H;
+    plane.H_earlier_from_later = consensus.model.H;
+    plane.m_later = consensus.model.m_later;
     for (size_t j = 0; j < remaining.size(); ++j) {
       if (!consensus.mask[j]) continue;
       plane.correspondence_indices.push_back(remaining[j]);
@@ -333,7 +343,7 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
       plane_later.push_back(corr[i].x_later_px);
       plane_earlier.push_back(corr[i].x_earlier_px);
     }
-    HomographyEstimator::Residuals(plane_later, plane_earlier, consensus.H, &sq_transfer);
+    HomographyEstimator::Residuals(plane_later, plane_earlier, consensus.model.H, &sq_transfer);
     double sum_sq = 0;
     for (double r : sq_transfer) sum_sq += r;
     plane.rms_transfer_px =
@@ -375,7 +385,7 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
         ++result.num_tracks_lost;
         continue;
       }
-      const RansacReport<Eigen::Matrix3d> report = run_ransac(&subset);
+      const RansacReport<PlaneModel> report = run_ransac(&subset);
       if (!report.success) {
         ++result.num_tracks_lost;
         continue;
@@ -386,8 +396,23 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
       ExtractedPlane plane = make_plane(consensus, track.track_id, /*tracked=*/true);
       plane.track_subset_size = static_cast<int>(subset.size());
       plane.track_subset_inliers = subset_inliers;
+      if (track.m_later.has_value() && plane.m_later.has_value() && used_motion != nullptr) {
+        // The remembered plane, m_e . X_e = 1 in this pair's earlier frame,
+        // moved into the later one: X_e = R X_l + t gives
+        // m_l = R^T m_e / (1 - m_e . t) (|t| = 1 per pair: consecutive pairs
+        // span the same number of frames, so their units agree to within the
+        // change of speed).
+        const Rigid3d earlier_from_later = used_motion->later_from_earlier.Inverse();
+        const double denom = 1.0 - track.m_later->dot(earlier_from_later.translation);
+        if (denom > 0.0) {
+          const Eigen::Vector3d m_pred =
+              earlier_from_later.R().transpose() * *track.m_later / denom;
+          plane.track_change = (*plane.m_later - m_pred).norm() / m_pred.norm();
+        }
+      }
       if (static_cast<int>(plane.mb_indices.size()) < min_mbs ||
-          subset_inliers < options_.min_track_overlap * static_cast<double>(subset.size())) {
+          subset_inliers < options_.min_track_overlap * static_cast<double>(subset.size()) ||
+          plane.track_change > options_.max_track_change) {
         ++result.num_tracks_lost;
         continue;
       }
@@ -401,7 +426,7 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
   int failed_discoveries = 0;
   while (static_cast<int>(result.planes.size()) < options_.max_planes &&
          static_cast<int>(remaining.size()) >= fitter->MinSamples()) {
-    const RansacReport<Eigen::Matrix3d> report = run_ransac(nullptr);
+    const RansacReport<PlaneModel> report = run_ransac(nullptr);
     if (!report.success) break;
     const Consensus consensus = post_process(report);
     ExtractedPlane plane = make_plane(consensus, next_track_id_, /*tracked=*/false);
@@ -430,8 +455,9 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
   // 3. Remember the planes' MB cells in this pair's later anchor.
   tracks_.clear();
   for (const ExtractedPlane& plane : result.planes) {
-    tracks_.push_back(
-        {plane.track_id, std::set<int>(plane.mb_indices.begin(), plane.mb_indices.end())});
+    tracks_.push_back({plane.track_id,
+                       std::set<int>(plane.mb_indices.begin(), plane.mb_indices.end()),
+                       plane.m_later});
   }
   has_previous_ = true;
   last_later_index_ = pair.later_index;

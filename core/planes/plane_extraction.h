@@ -49,6 +49,7 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <set>
 #include <vector>
 
@@ -109,6 +110,13 @@ struct PlaneExtractionOptions {
   // (core/estimators/epipolar_plane.h: 3-point samples, planes in front of
   // the camera) instead of free 8-parameter ones. Beyond the paper.
   bool use_motion = true;
+  // Motion-constrained tracking: a remembered plane continues only if the
+  // plane found on its MBs is the remembered one moved by the pair's motion,
+  // track_change <= this (relative change of m; see ExtractedPlane). Else the
+  // MBs were taken over by another surface (a tree in front of a facade, the
+  // next building): the track is lost and its points return to discovery, so
+  // the filter never sees one plane jump to another's depth.
+  double max_track_change = 0.25;
 };
 
 // The relative motion of an anchor pair, when the epipolar geometry was
@@ -129,6 +137,13 @@ struct ExtractedPlane {
   // correspondences, px: near the MV noise for a real plane, near eps_h / sqrt(2)
   // for points that fit only by accident.
   double rms_transfer_px = 0.0;
+  // Motion-constrained fits: the plane m = n / d in the later camera frame
+  // (m . X = 1), in the unit of the pair's translation (|t| = 1).
+  std::optional<Eigen::Vector3d> m_later;
+  // Tracked planes with m on both pairs: |m_later - m_predicted| / |m_predicted|,
+  // m_predicted being the previous pair's plane moved by this pair's motion;
+  // -1 when not available.
+  double track_change = -1.0;
   // Tracked planes only: the sampling subset (correspondences on the track's
   // old MBs) and how many of it are inliers of this plane.
   int track_subset_size = 0;
@@ -165,6 +180,7 @@ class PlaneExtractor {
   struct Track {
     int track_id;
     std::set<int> mb_cells;  // MB indices in the anchor with display index last_later_index_
+    std::optional<Eigen::Vector3d> m_later;  // the plane in that anchor's frame, if known
   };
 
   PlaneExtractionOptions options_;
