@@ -240,6 +240,62 @@ TEST(PlaneEkfTest, TracksMotionAndPlanesOnExactCorrespondences) {
   }
 }
 
+// The scale gauge: an update keeps the geometric mean of |pi| over planes
+// observed >= pin_scale_min_observations times before it (it may move them
+// relative to each other), reports the rescaling it applied, and with the
+// pin off the same updates do move that mean.
+TEST(PlaneEkfTest, EstablishedPlanesPinTheScaleThroughUpdates) {
+  const Intrinsics K = Intrinsics::FromHorizontalFov(640, 480, 70);
+  const double dt = 4.0 / 30.0, step_m = 1.2;
+  const int steps = 8;
+  const auto poses = DrivePoses(steps, step_m);
+  const std::vector<WorldPlane> planes = {
+      {{0, -1, 0}, -1.5}, {{1, 0, 0}, -6.0}, {{-1, 0, 0}, -8.0}};
+  for (int pin : {2, 0}) {
+    std::mt19937_64 rng(11);
+    EkfOptions opts;
+    opts.pin_scale_min_observations = pin;
+    PlaneEkf ekf(K, opts);
+    ASSERT_TRUE(ekf.Initialize(poses[0].Inverse() * poses[1], dt).ok());
+    double max_mean_change = 0.0;
+    for (int k = 1; k <= steps; ++k) {
+      if (k > 1) ASSERT_TRUE(ekf.Predict(dt).ok());
+      std::vector<PlaneObservation> obs;
+      for (size_t i = 0; i < planes.size(); ++i) {
+        obs.push_back(Observe(K, poses[k - 1], poses[k], planes[i], static_cast<int>(i), 0.5, rng));
+      }
+      double log_before = 0;
+      int established = 0;
+      for (const PlaneTrack& t : ekf.planes()) {
+        if (t.observations < 2) continue;
+        log_before += std::log(t.pi.norm());
+        ++established;
+      }
+      UpdateReport report;
+      ASSERT_TRUE(ekf.Update(obs, &report).ok());
+      if (established == 0) {
+        EXPECT_EQ(report.scale_correction, 1.0);
+        continue;
+      }
+      double log_after = 0;
+      for (const PlaneTrack& t : ekf.planes()) {
+        if (t.observations >= 3) log_after += std::log(t.pi.norm());  // counted this update
+      }
+      const double change = std::abs(log_after - log_before) / established;
+      max_mean_change = std::max(max_mean_change, change);
+      if (pin > 0) {
+        EXPECT_LT(change, 1e-9) << "step " << k;
+        EXPECT_GT(report.scale_correction, 0.5);
+        EXPECT_LT(report.scale_correction, 2.0);
+      } else {
+        EXPECT_EQ(report.scale_correction, 1.0);
+      }
+    }
+    // 0.5 px noise moves the planes' common scale a little in every update.
+    if (pin == 0) EXPECT_GT(max_mean_change, 1e-5);
+  }
+}
+
 TEST(PlaneEkfTest, PlaneLifeCycleAndBadInput) {
   const Intrinsics K = Intrinsics::FromHorizontalFov(640, 480, 70);
   const auto poses = DrivePoses(3, 1.0);

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 
 #include <opencv2/imgcodecs.hpp>
 
@@ -84,6 +85,8 @@ int RunRun(int argc, char** argv) {
        {"speed-kmh", "V", "metric scale: speed at the start", ""},
        {"camera-height-m", "H", "metric scale: camera height above the road plane", ""},
        {"eps-h", "PX", "homography inlier threshold", "1"},
+       {"steps-csv", "FILE", "also write one CSV row per anchor pair: its planes and the filter's",
+        ""},
        {"quiet", "", "no progress line", ""}});
   if (Status s = flags.Parse(argc, argv); !s.ok()) return Fail("run", s.message(), 2);
   if (flags.help_requested()) {
@@ -137,6 +140,15 @@ int RunRun(int argc, char** argv) {
   std::filesystem::create_directories(out_dir, ec);
   if (ec) return Fail("run", "cannot create " + out_dir + ": " + ec.message());
 
+  std::unique_ptr<std::FILE, int (*)(std::FILE*)> steps_csv(nullptr, &std::fclose);
+  if (flags.Has("steps-csv")) {
+    steps_csv.reset(std::fopen(flags.GetString("steps-csv").c_str(), "w"));
+    if (!steps_csv) return Fail("run", "cannot write " + flags.GetString("steps-csv"));
+    std::fprintf(
+        steps_csv.get(),
+        "later_index,tracking,step_length,kept,filter_planes,updated,added,removed,rejected,"
+        "reassociated,rms_residual_px,extracted,note\n");
+  }
   Pipeline pipeline(*intrinsics, info.mv_sigma_px(), po);
   std::vector<PlaneEstimate> plane_estimates;
   const bool progress = !flags.GetBool("quiet") && isatty(STDERR_FILENO);
@@ -155,6 +167,26 @@ int RunRun(int argc, char** argv) {
     const PipelineStep& s = **step;
     ++steps;
     tracked += s.tracking;
+    if (steps_csv) {
+      // extracted: track_id:MBs:t(racked)/n(ew):track_change, space separated.
+      std::string extracted;
+      for (const ExtractedPlane& ex : s.extracted) {
+        char buf[64];
+        std::snprintf(buf, sizeof(buf), "%s%d:%zu:%c:%.2f", extracted.empty() ? "" : " ",
+                      ex.track_id, ex.mb_indices.size(), ex.tracked ? 't' : 'n', ex.track_change);
+        extracted += buf;
+      }
+      const auto& traj = pipeline.trajectory();
+      const double length = traj.size() >= 2 ? (traj.back().world_from_cam.translation -
+                                                traj[traj.size() - 2].world_from_cam.translation)
+                                                   .norm()
+                                             : 0.0;
+      std::fprintf(steps_csv.get(), "%lld,%d,%.4f,%d,%zu,%d,%d,%d,%d,%d,%.3f,%s,\"%s\"\n",
+                   static_cast<long long>(s.later_index), s.tracking ? 1 : 0, length, s.kept,
+                   s.planes.size(), s.ekf.planes_updated, s.ekf.planes_added, s.ekf.planes_removed,
+                   s.ekf.planes_rejected, s.ekf.planes_reassociated, s.ekf.rms_residual_px,
+                   extracted.c_str(), s.note.c_str());
+    }
     for (const PlaneTrack& track : s.planes) {
       PlaneEstimate e{s.later_index, track.track_id, track.pi, {}};
       for (const ExtractedPlane& ex : s.extracted) {

@@ -439,6 +439,31 @@ Status PlaneEkf::Update(const std::vector<PlaneObservation>& observations, Updat
     }
     P_ = std::move(P_new);
     Symmetrize(&P_);
+    // Scale gauge. Observations see t and pi only through t pi^T, so
+    // (t, v, pi) -> (s t, s v, pi / s) changes no prediction: the scale is
+    // unobservable, and linearisation errors let it run away (on simulated
+    // drives the step length grew 4x in 5 updates while the planes were
+    // tracked consistently). Static planes that the filter has already seen
+    // pin it: the update's common change of their |pi| (geometric mean over
+    // planes with >= pin_scale_min_observations) is undone by rescaling the
+    // whole state, so the update may move them relative to each other but
+    // not all together.
+    if (options_.pin_scale_min_observations > 0) {
+      double log_sum = 0;
+      int pinned = 0;
+      for (const auto& [index, obs] : tracked) {
+        if (planes_[index].observations < options_.pin_scale_min_observations) continue;
+        const double before = pi0[index].norm(), after = planes_[index].pi.norm();
+        if (!(before > 0 && after > 0)) continue;
+        log_sum += std::log(after / before);
+        ++pinned;
+      }
+      if (pinned > 0) {
+        // pi scaled by k = exp(mean log ratio): multiply lengths by k.
+        rep.scale_correction = std::exp(log_sum / pinned);
+        Rescale(rep.scale_correction);
+      }
+    }
     for (const auto& [index, obs] : tracked) ++planes_[index].observations;
     rep.planes_updated = static_cast<int>(tracked.size());
   }

@@ -74,6 +74,9 @@ struct EkfOptions {
   // Initial uncertainty of the velocities at initialisation.
   double init_angular_velocity_rad_s = 0.2;
   double init_velocity_rel = 0.3;  // fraction of |v|
+  // Scale gauge (see Update): planes observed at least this often before an
+  // update keep their common scale through it; 0 = off.
+  int pin_scale_min_observations = 2;
 };
 
 // One plane's macroblock correspondences between the previous anchor and the
@@ -106,6 +109,8 @@ struct UpdateReport {
   int measurements = 0;
   double rms_residual_px = 0.0;  // after the update
   bool skipped = false;          // no tracked plane observed
+  // The factor the state's lengths were rescaled by to pin the scale (1: none).
+  double scale_correction = 1.0;
 };
 
 class PlaneEkf {
