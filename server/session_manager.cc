@@ -748,6 +748,7 @@ void SessionManager::RunSession(const std::shared_ptr<Session>& s) {
   StreamInfo first_info;
   Clock::time_point start;    // when the pipeline was made
   std::set<int> live_planes;  // track ids the filter held after the previous step
+  std::map<int64_t, google::protobuf::Timestamp> received;  // frame index -> when read
   int64_t pairs = 0, tracked = 0;
   int64_t index_offset = 0;       // added to a connection's frame indices
   double time_offset_s = 0.0;     // and to its timestamps
@@ -837,6 +838,7 @@ void SessionManager::RunSession(const std::shared_ptr<Session>& s) {
         last_index = frame.index;
         last_timestamp_s = frame.timestamp_s;
         last_frame_wall = Clock::now();
+        received[frame.index] = TimeUtil::GetCurrentTime();
         auto step = pipeline->Push(frame);
         if (!step.ok()) return end(step.status());
         const double wall_s = std::chrono::duration<double>(Clock::now() - start).count();
@@ -882,6 +884,9 @@ void SessionManager::RunSession(const std::shared_ptr<Session>& s) {
             pu->set_tracking(ps.tracking);
             pu->set_metric(ps.metric);
             pu->set_note(ps.note);
+            auto r = received.find(ps.later_index);
+            if (r != received.end()) *pu->mutable_frame_received_time() = r->second;
+            received.erase(received.begin(), received.upper_bound(ps.later_index));
             events.push_back(std::move(pose));
 
             std::set<int> now;
@@ -909,7 +914,10 @@ void SessionManager::RunSession(const std::shared_ptr<Session>& s) {
             live_planes = std::move(now);
           }
         }
-        for (auto& e : events) s->events->Append(std::move(e));
+        for (auto& e : events) {
+          if (e.has_pose()) *e.mutable_pose()->mutable_emit_time() = TimeUtil::GetCurrentTime();
+          s->events->Append(std::move(e));
+        }
       }
       if (source != v1::Session::kRtspPull) {
         if (timed_out && status.code() == StatusCode::kCancelled) return end_timed_out();
