@@ -42,6 +42,14 @@ constexpr int kMaxReconnectAttempts = 1000000;
 constexpr int kMaxReconnectIntervalMs = 3600000;
 constexpr size_t kMaxRtspUrlChars = 2048;
 
+// The wall clock to the nanosecond (TimeUtil::GetCurrentTime of protobuf 3.21
+// has whole seconds only).
+google::protobuf::Timestamp PreciseNow() {
+  return TimeUtil::NanosecondsToTimestamp(std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                              std::chrono::system_clock::now().time_since_epoch())
+                                              .count());
+}
+
 Status ValidateTimeouts(int start_ms, int receive_ms, const std::string& what) {
   if (start_ms < 0 || receive_ms < 0) {
     return InvalidArgumentError(what +
@@ -838,7 +846,7 @@ void SessionManager::RunSession(const std::shared_ptr<Session>& s) {
         last_index = frame.index;
         last_timestamp_s = frame.timestamp_s;
         last_frame_wall = Clock::now();
-        received[frame.index] = TimeUtil::GetCurrentTime();
+        received[frame.index] = PreciseNow();
         auto step = pipeline->Push(frame);
         if (!step.ok()) return end(step.status());
         const double wall_s = std::chrono::duration<double>(Clock::now() - start).count();
@@ -915,7 +923,7 @@ void SessionManager::RunSession(const std::shared_ptr<Session>& s) {
           }
         }
         for (auto& e : events) {
-          if (e.has_pose()) *e.mutable_pose()->mutable_emit_time() = TimeUtil::GetCurrentTime();
+          if (e.has_pose()) *e.mutable_pose()->mutable_emit_time() = PreciseNow();
           s->events->Append(std::move(e));
         }
       }
