@@ -42,6 +42,14 @@ constexpr int kMaxReconnectAttempts = 1000000;
 constexpr int kMaxReconnectIntervalMs = 3600000;
 constexpr size_t kMaxRtspUrlChars = 2048;
 
+// The wall clock to the nanosecond (TimeUtil::GetCurrentTime of protobuf 3.21
+// has whole seconds only).
+google::protobuf::Timestamp PreciseNow() {
+  return TimeUtil::NanosecondsToTimestamp(std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                              std::chrono::system_clock::now().time_since_epoch())
+                                              .count());
+}
+
 Status ValidateTimeouts(int start_ms, int receive_ms, const std::string& what) {
   if (start_ms < 0 || receive_ms < 0) {
     return InvalidArgumentError(what +
@@ -748,6 +756,7 @@ void SessionManager::RunSession(const std::shared_ptr<Session>& s) {
   StreamInfo first_info;
   Clock::time_point start;    // when the pipeline was made
   std::set<int> live_planes;  // track ids the filter held after the previous step
+  std::map<int64_t, google::protobuf::Timestamp> received;  // frame index -> when read
   int64_t pairs = 0, tracked = 0;
   int64_t index_offset = 0;       // added to a connection's frame indices
   double time_offset_s = 0.0;     // and to its timestamps
@@ -837,6 +846,7 @@ void SessionManager::RunSession(const std::shared_ptr<Session>& s) {
         last_index = frame.index;
         last_timestamp_s = frame.timestamp_s;
         last_frame_wall = Clock::now();
+        received[frame.index] = PreciseNow();
         auto step = pipeline->Push(frame);
         if (!step.ok()) return end(step.status());
         const double wall_s = std::chrono::duration<double>(Clock::now() - start).count();
@@ -882,6 +892,9 @@ void SessionManager::RunSession(const std::shared_ptr<Session>& s) {
             pu->set_tracking(ps.tracking);
             pu->set_metric(ps.metric);
             pu->set_note(ps.note);
+            auto r = received.find(ps.later_index);
+            if (r != received.end()) *pu->mutable_frame_received_time() = r->second;
+            received.erase(received.begin(), received.upper_bound(ps.later_index));
             events.push_back(std::move(pose));
 
             std::set<int> now;
@@ -909,7 +922,10 @@ void SessionManager::RunSession(const std::shared_ptr<Session>& s) {
             live_planes = std::move(now);
           }
         }
-        for (auto& e : events) s->events->Append(std::move(e));
+        for (auto& e : events) {
+          if (e.has_pose()) *e.mutable_pose()->mutable_emit_time() = PreciseNow();
+          s->events->Append(std::move(e));
+        }
       }
       if (source != v1::Session::kRtspPull) {
         if (timed_out && status.code() == StatusCode::kCancelled) return end_timed_out();

@@ -11,6 +11,8 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "core/common/intrinsics_io.h"
+
 namespace slapse::testing {
 
 std::string MakeTempDir(const std::string& tag) {
@@ -58,6 +60,18 @@ Status WritePan(const std::string& path, const EncoderOptions& options, int fram
     SLAPSE_RETURN_IF_ERROR((*enc)->Write(frame));
   }
   return (*enc)->Finish();
+}
+
+StatusOr<TestDrive> SimulateTestDrive(const std::string& tag, SimulateOptions options) {
+  TestDrive drive;
+  drive.dir = MakeTempDir(tag);
+  options.output_dir = drive.dir;
+  SLAPSE_RETURN_IF_ERROR(SimulateDrive(options, &drive.report));
+  drive.video_path = drive.report.video_path;
+  auto k = ReadIntrinsicsJson(drive.dir + "/intrinsics.json");
+  if (!k.ok()) return k.status();
+  drive.intrinsics = *k;
+  return drive;
 }
 
 std::string ReadFileBytes(const std::string& path) {

@@ -6,7 +6,9 @@
 #include <opencv2/core.hpp>
 
 #include "core/codec/video_encoder.h"
+#include "core/common/camera.h"
 #include "core/common/status.h"
+#include "core/sim/simulate.h"
 
 namespace slapse::testing {
 
@@ -22,6 +24,18 @@ cv::Mat NoiseTexture(int width_px, int height_px, uint64_t seed);
 // j to frame r is therefore (r - j) * v.
 Status WritePan(const std::string& path, const EncoderOptions& options, int frames, double vx_px,
                 double vy_px, int width_px = 320, int height_px = 240);
+
+// A simulated drive (core/sim) on disk.
+struct TestDrive {
+  std::string dir;         // the simulator's output directory (ground truth, intrinsics.json)
+  std::string video_path;  // the encoded drive
+  Intrinsics intrinsics;   // its camera, as intrinsics.json holds it
+  SimulateReport report;
+};
+
+// Simulates a drive with `options` into a fresh temp dir tagged `tag` (the
+// options' output_dir is replaced).
+StatusOr<TestDrive> SimulateTestDrive(const std::string& tag, SimulateOptions options);
 
 // Reads a whole file into memory.
 std::string ReadFileBytes(const std::string& path);

@@ -5,7 +5,6 @@
 
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <memory>
 
 #include <opencv2/imgcodecs.hpp>
@@ -17,6 +16,7 @@
 #include "core/eval/trajectory_eval.h"
 #include "core/mv/mv_reader.h"
 #include "core/pipeline/pipeline.h"
+#include "core/pipeline/result_io.h"
 #include "core/sim/ground_truth.h"
 #include "core/viz/plane_overlay.h"
 #include "core/viz/top_down_plot.h"
@@ -24,52 +24,15 @@
 namespace slapse::cli {
 namespace {
 
-Status WriteTrajectories(const std::vector<Pipeline::TrajectoryPoint>& traj,
-                         const std::string& dir) {
-  std::ofstream tum(dir + "/trajectory_tum.txt"), kitti(dir + "/trajectory_kitti.txt");
-  if (!tum || !kitti) return UnavailableError("cannot write trajectories into " + dir);
-  tum << "# timestamp_s tx ty tz qx qy qz qw  (world_from_cam; world = first tracked camera, "
-         "x right, y down, z forward)\n";
-  char line[400];
-  for (const auto& p : traj) {
-    const Eigen::Quaterniond& q = p.world_from_cam.rotation;
-    const Eigen::Vector3d& t = p.world_from_cam.translation;
-    std::snprintf(line, sizeof(line), "%.6f %.9f %.9f %.9f %.9f %.9f %.9f %.9f\n", p.timestamp_s,
-                  t.x(), t.y(), t.z(), q.x(), q.y(), q.z(), q.w());
-    tum << line;
-    const Eigen::Matrix3d R = p.world_from_cam.R();
-    std::snprintf(line, sizeof(line),
-                  "%.9f %.9f %.9f %.9f %.9f %.9f %.9f %.9f %.9f %.9f %.9f %.9f\n", R(0, 0), R(0, 1),
-                  R(0, 2), t.x(), R(1, 0), R(1, 1), R(1, 2), t.y(), R(2, 0), R(2, 1), R(2, 2),
-                  t.z());
-    kitti << line;
-  }
-  return Status::Ok();
-}
-
-Status WritePlanes(const std::map<int, MapPlane>& planes, bool metric, const std::string& path) {
-  std::ofstream out(path);
-  if (!out) return UnavailableError("cannot write " + path);
-  out << "{\n  \"frame\": \"world = first tracked camera (x right, y down, z forward); n . X = "
-         "d\",\n"
-      << "  \"unit\": \"" << (metric ? "m" : "first step") << "\",\n  \"planes\": [";
-  bool first = true;
-  char buf[256];
-  for (const auto& [id, p] : planes) {
-    out << (first ? "\n" : ",\n");
-    first = false;
-    std::snprintf(
-        buf, sizeof(buf),
-        "    {\"track_id\": %d, \"normal_world\": [%.6f, %.6f, %.6f], \"distance\": %.6f, "
-        "\"first_seen_s\": %.3f, \"last_seen_s\": %.3f, \"updates\": %d, ",
-        id, p.normal_world.x(), p.normal_world.y(), p.normal_world.z(), p.distance_m,
-        p.first_seen_s, p.last_seen_s, p.observations);
-    out << buf << "\"seen_at_frames\": [";
-    for (size_t i = 0; i < p.seen_indices.size(); ++i) out << (i ? ", " : "") << p.seen_indices[i];
-    out << "]}";
-  }
-  out << "\n  ]\n}\n";
-  return Status::Ok();
+Status WriteResults(const Pipeline& pipeline, const std::string& dir) {
+  const auto& traj = pipeline.trajectory();
+  SLAPSE_RETURN_IF_ERROR(WriteResultFile(
+      dir + "/trajectory_tum.txt", [&](std::ostream& out) { WriteTrajectoryTum(traj, out); }));
+  SLAPSE_RETURN_IF_ERROR(WriteResultFile(
+      dir + "/trajectory_kitti.txt", [&](std::ostream& out) { WriteTrajectoryKitti(traj, out); }));
+  return WriteResultFile(dir + "/planes.json", [&](std::ostream& out) {
+    WriteResultJson(pipeline.plane_map(), pipeline.metric(), ResultJsonOptions{}, out);
+  });
 }
 
 }  // namespace
@@ -200,13 +163,7 @@ int RunRun(int argc, char** argv) {
   if (!stream_ok)
     std::fprintf(stderr, "slapse run: %s (results up to there)\n", end.ToString().c_str());
 
-  if (Status s = WriteTrajectories(pipeline.trajectory(), out_dir); !s.ok()) {
-    return Fail("run", s.ToString());
-  }
-  if (Status s = WritePlanes(pipeline.plane_map(), pipeline.metric(), out_dir + "/planes.json");
-      !s.ok()) {
-    return Fail("run", s.ToString());
-  }
+  if (Status s = WriteResults(pipeline, out_dir); !s.ok()) return Fail("run", s.ToString());
   std::printf("input      %s (%s, %dx%d, %lld frames)\n", input.c_str(), info.codec_name.c_str(),
               info.width_px, info.height_px, static_cast<long long>((*reader)->stats().frames));
   std::printf("tracked    %d of %d anchor pairs, %zu poses, %zu planes in the map (%s)\n", tracked,

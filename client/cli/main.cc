@@ -43,6 +43,8 @@ const Command kCommands[] = {
     {"get", slapse::cli::RunGet, "show one session with its statistics"},
     {"stop", slapse::cli::RunStop, "stop a session (keeps its results)"},
     {"delete", slapse::cli::RunDelete, "stop and forget a session"},
+    {"export", slapse::cli::RunExport,
+     "a session's trajectory / plane map from a server as TUM, KITTI or JSON files"},
 };
 
 void PrintUsage(FILE* out) {

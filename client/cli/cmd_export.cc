@@ -1,0 +1,101 @@
+// slapse export: a session's trajectory and plane map from a server
+// (GetTrajectory, GetPlaneMap) in the files `slapse run` writes, through the
+// same writers (core/pipeline/result_io.h): equal results, equal bytes.
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+
+#include "client/cli/commands.h"
+#include "client/cli/flags.h"
+#include "client/lib/client.h"
+#include "client/lib/results.h"
+#include "core/pipeline/result_io.h"
+
+namespace slapse::cli {
+namespace {
+
+// The file `slapse run` writes for each format, used when --out is a directory.
+const char* DefaultFileName(const std::string& format) {
+  if (format == "tum") return "trajectory_tum.txt";
+  if (format == "kitti") return "trajectory_kitti.txt";
+  return "session.json";
+}
+
+}  // namespace
+
+int RunExport(int argc, char** argv) {
+  Flags flags(
+      "export",
+      "SESSION [options]   (the session's trajectory / plane map so far, as slapse run writes "
+      "them)",
+      {{"server", "HOST:PORT", "the slapse server", "localhost:50051"},
+       {"format", "FMT",
+        "tum or kitti (trajectory, as run's trajectory_*.txt), json (trajectory + planes, "
+        "run's planes.json schema)",
+        "json"},
+       {"out", "PATH",
+        "file to write, '-' for stdout, or a directory (gets trajectory_tum.txt, "
+        "trajectory_kitti.txt or session.json)",
+        "-"}});
+  if (Status s = flags.Parse(argc, argv); !s.ok()) return Fail("export", s.message(), 2);
+  if (flags.help_requested()) {
+    std::printf("%s", flags.Usage().c_str());
+    return 0;
+  }
+  if (flags.positional().size() != 1) {
+    return Fail("export", "expected one SESSION, e.g. sessions/1 (see --help)", 2);
+  }
+  const std::string format = flags.GetString("format");
+  if (format != "tum" && format != "kitti" && format != "json") {
+    return Fail("export", "--format must be tum, kitti or json, not '" + format + "'", 2);
+  }
+  std::string out = flags.GetString("out");
+  std::error_code ec;
+  if (out != "-" && std::filesystem::is_directory(out, ec)) {
+    out = (std::filesystem::path(out) / DefaultFileName(format)).string();
+  }
+
+  const std::string name = flags.positional()[0];
+  auto client = client::SlapseClient::Connect(flags.GetString("server"));
+  auto session = client->GetSession(name);
+  if (!session.ok()) return Fail("export", session.status().ToString());
+  auto trajectory = client->GetTrajectory(name);
+  if (!trajectory.ok()) return Fail("export", trajectory.status().ToString());
+  v1::PlaneMap plane_map;
+  if (format == "json") {
+    auto got = client->GetPlaneMap(name);
+    if (!got.ok()) return Fail("export", got.status().ToString());
+    plane_map = std::move(*got);
+  }
+
+  const std::vector<Pipeline::TrajectoryPoint> traj = client::TrajectoryFromProto(*trajectory);
+  auto write = [&](std::ostream& os) {
+    if (format == "tum") {
+      WriteTrajectoryTum(traj, os);
+    } else if (format == "kitti") {
+      WriteTrajectoryKitti(traj, os);
+    } else {
+      ResultJsonOptions o;
+      o.seen_at_frames = false;  // a server's plane map does not keep them
+      o.trajectory = &traj;
+      WriteResultJson(client::PlaneMapFromProto(plane_map), trajectory->metric(), o, os);
+    }
+  };
+  if (out == "-") {
+    write(std::cout);
+    std::cout.flush();
+    if (!std::cout) return Fail("export", "cannot write to stdout");
+    return 0;
+  }
+  if (Status s = WriteResultFile(out, write); !s.ok()) return Fail("export", s.message());
+  const bool active =
+      session->state() == v1::Session::CREATED || session->state() == v1::Session::RUNNING;
+  std::printf(
+      "wrote %s: %d poses%s of %s (%s%s)\n", out.c_str(), trajectory->points_size(),
+      format == "json" ? (", " + std::to_string(plane_map.planes_size()) + " planes").c_str() : "",
+      name.c_str(), v1::Session::State_Name(session->state()).c_str(),
+      active ? ": a snapshot so far" : "");
+  return 0;
+}
+
+}  // namespace slapse::cli
