@@ -1,0 +1,91 @@
+// The main job end to end on real motion vectors: a simulated MPEG-2 IBBBP
+// street drive, encoded by libavcodec, read back by the MV reader and run
+// through the whole pipeline (merging, plane at infinity, plane extraction,
+// EKF); trajectory and plane map scored against the simulator's truth.
+//
+// The bounds sit above what bench/table2.sh measures on 5 s drives (eps_D
+// 1.3-10.7 %, ATE 0.3-1.7 % of the distance, eps_d 0.4-2.3 m, eps_n 1.3-3.3
+// deg; docs/TRAJECTORY.md; this drive: eps_D 5.9 %, ATE 0.46 m over 37 m,
+// eps_d 2.4 m, eps_n 3.9 deg) and below what a broken pipeline gives: without
+// the EKF's scale pin and the extractor's track-change gate this drive has
+// eps_n 9.1 deg (and drive 5 of Table II eps_D 79 %); a wrong Jacobian or
+// sign does not track at all.
+#include <cstdio>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "core/eval/plane_map_eval.h"
+#include "core/eval/trajectory_eval.h"
+#include "core/mv/mv_reader.h"
+#include "core/pipeline/pipeline.h"
+#include "core/sim/ground_truth.h"
+#include "tests/test_streams.h"
+
+namespace slapse {
+namespace {
+
+TEST(TrajectoryEndToEndTest, SimulatedDriveWithinErrorBounds) {
+  SimulateOptions options;
+  options.seed = 3;
+  options.duration_s = 4.0;
+  auto drive = testing::SimulateTestDrive("trajectory_e2e", options);
+  ASSERT_TRUE(drive.ok()) << drive.status().ToString();
+  auto gt = LoadGroundTruth(drive->dir);
+  ASSERT_TRUE(gt.ok()) << gt.status().ToString();
+  auto reader = MvReader::Open(drive->video_path);
+  ASSERT_TRUE(reader.ok()) << reader.status().ToString();
+
+  Pipeline pipeline(drive->intrinsics, (*reader)->info().mv_sigma_px());
+  std::vector<PlaneEstimate> planes;
+  int steps = 0, tracked = 0;
+  FrameRecord frame;
+  Status status;
+  while ((status = (*reader)->Next(&frame)).ok()) {
+    auto step = pipeline.Push(frame);
+    ASSERT_TRUE(step.ok()) << step.status().ToString();
+    if (!step->has_value()) continue;
+    const PipelineStep& s = **step;
+    ++steps;
+    tracked += s.tracking;
+    for (const PlaneTrack& track : s.planes) {
+      PlaneEstimate e{s.later_index, track.track_id, track.pi, {}};
+      for (const ExtractedPlane& ex : s.extracted) {
+        if (ex.track_id == track.track_id) e.mb_indices = ex.mb_indices;
+      }
+      if (!e.mb_indices.empty()) planes.push_back(std::move(e));
+    }
+  }
+  ASSERT_EQ(status.code(), StatusCode::kOutOfRange) << status.ToString();
+  EXPECT_GE(tracked, steps - 1);  // tracking from the first pair on
+
+  std::vector<TimedPose> estimate, truth;
+  for (const auto& p : pipeline.trajectory()) {
+    estimate.push_back({p.index, p.timestamp_s, p.world_from_cam});
+  }
+  for (size_t i = 0; i < gt->frames.size(); ++i) {
+    truth.push_back(
+        {static_cast<int64_t>(i), gt->frames[i].timestamp_s, gt->frames[i].world_from_cam});
+  }
+  auto errors = EvaluateTrajectory(estimate, truth);
+  ASSERT_TRUE(errors.ok()) << errors.status().ToString();
+  const double distance_m =
+      (truth.back().world_from_cam.translation - truth.front().world_from_cam.translation).norm();
+  auto map = EvaluatePlaneMap(planes, *gt, errors->first_step_scale);
+  ASSERT_TRUE(map.ok()) << map.status().ToString();
+  std::printf(
+      "distance %.1f m, eps_D %.2f %%, ATE %.3f m, planes %d, eps_d %.2f m, eps_n %.2f deg\n",
+      distance_m, 100 * errors->eps_D, errors->ate_rmse_m, map->planes_evaluated, map->eps_d_m,
+      map->eps_n_deg);
+
+  EXPECT_GT(distance_m, 25.0);
+  EXPECT_GE(static_cast<int>(estimate.size()), 25);
+  EXPECT_LT(errors->eps_D, 0.15);
+  EXPECT_LT(errors->ate_rmse_m, 0.03 * distance_m);
+  ASSERT_GE(map->planes_evaluated, 2);
+  EXPECT_LT(map->eps_d_m, 3.0);
+  EXPECT_LT(map->eps_n_deg, 5.0);
+}
+
+}  // namespace
+}  // namespace slapse
