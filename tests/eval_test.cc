@@ -72,10 +72,9 @@ TEST(EvalTest, TrueHomographyMapsSimulatedPlanePointsAndTheDriveScores) {
   SimulateOptions opt;
   opt.seed = 5;
   opt.duration_s = 2.0;
-  opt.output_dir = testing::MakeTempDir("eval");
-  SimulateReport report;
-  ASSERT_TRUE(SimulateDrive(opt, &report).ok());
-  auto gt = LoadGroundTruth(opt.output_dir);
+  auto drive = testing::SimulateTestDrive("eval", opt);
+  ASSERT_TRUE(drive.ok()) << drive.status().ToString();
+  auto gt = LoadGroundTruth(drive->dir);
   ASSERT_TRUE(gt.ok());
   // Every labelled block: H_true maps its centre where the true poses put it.
   int checked = 0;
@@ -96,7 +95,7 @@ TEST(EvalTest, TrueHomographyMapsSimulatedPlanePointsAndTheDriveScores) {
   // drive: a floor that a broken stage (no merging, wrong signs, no
   // thresholding) falls through. Current measured values are in
   // docs/PLANE_EXTRACTION.md; the floor sits well below them.
-  auto stats = EvaluateExtraction(opt.output_dir, ExtractionEvalOptions{});
+  auto stats = EvaluateExtraction(drive->dir, ExtractionEvalOptions{});
   ASSERT_TRUE(stats.ok()) << stats.status().ToString();
   std::printf("pairs %d planes %d TP %.1f %% recall %.1f %%\n", stats->pairs, stats->planes,
               100 * stats->tp_rate(), 100 * stats->recall());

@@ -18,7 +18,6 @@
 #include <vector>
 
 #include "client/lib/client.h"
-#include "core/common/intrinsics_io.h"
 #include "core/mv/mv_reader.h"
 #include "core/pipeline/pipeline.h"
 #include "core/sim/simulate.h"
@@ -124,14 +123,10 @@ class RtspPullTest : public ::testing::Test {
     sim.height_px = 240;
     sim.supersampling = 1;
     sim.encoder.codec = VideoCodec::kMpeg2;
-    sim.output_dir = *dir_ + "/drive";
-    SimulateReport report;
-    Status s = SimulateDrive(sim, &report);
-    ASSERT_TRUE(s.ok()) << s.ToString();
-    drive_path_ = new std::string(report.video_path);
-    auto k = ReadIntrinsicsJson(sim.output_dir + "/intrinsics.json");
-    ASSERT_TRUE(k.ok()) << k.status().ToString();
-    intrinsics_ = new Intrinsics(*k);
+    auto drive = testing::SimulateTestDrive("rtsp_pull_test_drive", sim);
+    ASSERT_TRUE(drive.ok()) << drive.status().ToString();
+    drive_path_ = new std::string(drive->video_path);
+    intrinsics_ = new Intrinsics(drive->intrinsics);
   }
   static void TearDownTestSuite() {
     delete dir_;

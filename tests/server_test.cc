@@ -24,7 +24,6 @@
 #include <grpcpp/support/byte_buffer.h>
 
 #include "client/lib/client.h"
-#include "core/common/intrinsics_io.h"
 #include "core/sim/simulate.h"
 #include "server/server.h"
 #include "server/upload_queue.h"
@@ -190,15 +189,11 @@ class ServerTest : public ::testing::Test {
     sim.height_px = 240;
     sim.supersampling = 1;
     sim.encoder.codec = VideoCodec::kMpeg2;
-    sim.output_dir = *dir_ + "/drive";
-    SimulateReport report;
-    Status s = SimulateDrive(sim, &report);
-    ASSERT_TRUE(s.ok()) << s.ToString();
-    drive_ = new std::string(testing::ReadFileBytes(report.video_path));
-    drive_path_ = new std::string(report.video_path);
-    auto k = ReadIntrinsicsJson(sim.output_dir + "/intrinsics.json");
-    ASSERT_TRUE(k.ok()) << k.status().ToString();
-    intrinsics_ = new Intrinsics(*k);
+    auto drive = testing::SimulateTestDrive("server_test_drive", sim);
+    ASSERT_TRUE(drive.ok()) << drive.status().ToString();
+    drive_ = new std::string(testing::ReadFileBytes(drive->video_path));
+    drive_path_ = new std::string(drive->video_path);
+    intrinsics_ = new Intrinsics(drive->intrinsics);
   }
   static void TearDownTestSuite() {
     delete dir_;

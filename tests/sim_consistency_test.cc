@@ -92,17 +92,16 @@ TEST_P(SimConsistencyTest, DecodedMvsMatchTheGroundTruthAndWrongTruthFails) {
   SimulateOptions opt;
   opt.seed = 11;
   opt.duration_s = 2.0;
-  opt.output_dir = testing::MakeTempDir("consistency");
   opt.encoder.codec = GetParam();
   opt.encoder.quality = GetParam() == VideoCodec::kH264 ? 20 : 4;
-  SimulateReport report;
-  ASSERT_TRUE(SimulateDrive(opt, &report).ok());
-  auto gt = LoadGroundTruth(opt.output_dir);
+  auto drive = testing::SimulateTestDrive("consistency", opt);
+  ASSERT_TRUE(drive.ok()) << drive.status().ToString();
+  auto gt = LoadGroundTruth(drive->dir);
   ASSERT_TRUE(gt.ok()) << gt.status().ToString();
 
   MvReaderOptions ro;
   ro.keep_luma = true;
-  auto reader = MvReader::Open(report.video_path, ro);
+  auto reader = MvReader::Open(drive->video_path, ro);
   ASSERT_TRUE(reader.ok()) << reader.status().ToString();
   std::vector<FrameRecord> frames;
   FrameRecord f;
