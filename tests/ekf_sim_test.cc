@@ -21,10 +21,9 @@ TEST(EkfSimTest, TracksADriveFromTrueCorrespondences) {
   SimulateOptions opt;
   opt.seed = 2;
   opt.duration_s = 4.0;
-  opt.output_dir = testing::MakeTempDir("ekf_sim");
-  SimulateReport report;
-  ASSERT_TRUE(SimulateDrive(opt, &report).ok());
-  auto gt = LoadGroundTruth(opt.output_dir);
+  auto drive = testing::SimulateTestDrive("ekf_sim", opt);
+  ASSERT_TRUE(drive.ok()) << drive.status().ToString();
+  auto gt = LoadGroundTruth(drive->dir);
   ASSERT_TRUE(gt.ok());
   const Intrinsics& K = gt->intrinsics;
   std::mt19937_64 rng(1);
@@ -33,13 +32,10 @@ TEST(EkfSimTest, TracksADriveFromTrueCorrespondences) {
   PlaneEkf ekf(K);
   const int gap = 4;  // IBBBP anchors
   const double dt = gap / opt.fps;
-  std::vector<TimedPose> est, truth;
+  std::vector<TimedPose> est;
+  const std::vector<TimedPose> truth = TruthPoses(*gt);
   std::vector<PlaneEstimate> planes;
   Rigid3d world_from_cam;
-  for (size_t i = 0; i < gt->frames.size(); ++i) {
-    truth.push_back(
-        {static_cast<int64_t>(i), gt->frames[i].timestamp_s, gt->frames[i].world_from_cam});
-  }
   est.push_back({0, 0.0, world_from_cam});
   for (int k = gap; k < static_cast<int>(gt->frames.size()); k += gap) {
     const Rigid3d& wl = gt->frames[k].world_from_cam;

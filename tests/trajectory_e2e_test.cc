@@ -48,25 +48,16 @@ TEST(TrajectoryEndToEndTest, SimulatedDriveWithinErrorBounds) {
     const PipelineStep& s = **step;
     ++steps;
     tracked += s.tracking;
-    for (const PlaneTrack& track : s.planes) {
-      PlaneEstimate e{s.later_index, track.track_id, track.pi, {}};
-      for (const ExtractedPlane& ex : s.extracted) {
-        if (ex.track_id == track.track_id) e.mb_indices = ex.mb_indices;
-      }
-      if (!e.mb_indices.empty()) planes.push_back(std::move(e));
-    }
+    AppendPlaneEstimates(s.later_index, s.planes, s.extracted, &planes);
   }
   ASSERT_EQ(status.code(), StatusCode::kOutOfRange) << status.ToString();
   EXPECT_GE(tracked, steps - 1);  // tracking from the first pair on
 
-  std::vector<TimedPose> estimate, truth;
+  std::vector<TimedPose> estimate;
   for (const auto& p : pipeline.trajectory()) {
     estimate.push_back({p.index, p.timestamp_s, p.world_from_cam});
   }
-  for (size_t i = 0; i < gt->frames.size(); ++i) {
-    truth.push_back(
-        {static_cast<int64_t>(i), gt->frames[i].timestamp_s, gt->frames[i].world_from_cam});
-  }
+  const std::vector<TimedPose> truth = TruthPoses(*gt);
   auto errors = EvaluateTrajectory(estimate, truth);
   ASSERT_TRUE(errors.ok()) << errors.status().ToString();
   const double distance_m =

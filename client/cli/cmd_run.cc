@@ -150,13 +150,7 @@ int RunRun(int argc, char** argv) {
                    s.ekf.planes_rejected, s.ekf.planes_reassociated, s.ekf.rms_residual_px,
                    extracted.c_str(), s.note.c_str());
     }
-    for (const PlaneTrack& track : s.planes) {
-      PlaneEstimate e{s.later_index, track.track_id, track.pi, {}};
-      for (const ExtractedPlane& ex : s.extracted) {
-        if (ex.track_id == track.track_id) e.mb_indices = ex.mb_indices;
-      }
-      if (!e.mb_indices.empty()) plane_estimates.push_back(std::move(e));
-    }
+    AppendPlaneEstimates(s.later_index, s.planes, s.extracted, &plane_estimates);
   }
   if (progress) std::fprintf(stderr, "\n");
   const bool stream_ok = end.code() == StatusCode::kOutOfRange;
@@ -176,13 +170,10 @@ int RunRun(int argc, char** argv) {
   const Sim3d* align = nullptr;
   std::optional<TrajectoryErrors> terr;
   if (gt.has_value()) {
-    std::vector<TimedPose> est, truth;
+    std::vector<TimedPose> est;
     for (const auto& p : pipeline.trajectory())
       est.push_back({p.index, p.timestamp_s, p.world_from_cam});
-    for (size_t i = 0; i < gt->frames.size(); ++i) {
-      truth.push_back(
-          {static_cast<int64_t>(i), gt->frames[i].timestamp_s, gt->frames[i].world_from_cam});
-    }
+    const std::vector<TimedPose> truth = TruthPoses(*gt);
     auto e = EvaluateTrajectory(est, truth);
     if (e.ok()) {
       terr = *e;

@@ -58,4 +58,16 @@ StatusOr<PlaneMapErrors> EvaluatePlaneMap(const std::vector<PlaneEstimate>& esti
   return out;
 }
 
+void AppendPlaneEstimates(int64_t anchor_index, const std::vector<PlaneTrack>& filter_planes,
+                          const std::vector<ExtractedPlane>& extracted,
+                          std::vector<PlaneEstimate>* estimates) {
+  for (const PlaneTrack& track : filter_planes) {
+    PlaneEstimate e{anchor_index, track.track_id, track.pi, {}};
+    for (const ExtractedPlane& ex : extracted) {
+      if (ex.track_id == track.track_id) e.mb_indices = ex.mb_indices;
+    }
+    if (!e.mb_indices.empty()) estimates->push_back(std::move(e));
+  }
+}
+
 }  // namespace slapse

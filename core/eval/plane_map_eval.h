@@ -10,6 +10,8 @@
 #include <Eigen/Core>
 
 #include "core/common/status.h"
+#include "core/ekf/plane_ekf.h"
+#include "core/planes/plane_extraction.h"
 #include "core/sim/ground_truth.h"
 
 namespace slapse {
@@ -21,6 +23,13 @@ struct PlaneEstimate {
   Eigen::Vector3d pi_cam = Eigen::Vector3d::Zero();  // n / d in the anchor's camera
   std::vector<int> mb_indices;                       // its macroblocks at that anchor
 };
+
+// Appends the filter's planes after the anchor pair ending at `anchor_index`,
+// each with the macroblocks it was extracted on in that pair; filter planes
+// not extracted in it (no macroblocks) are left out.
+void AppendPlaneEstimates(int64_t anchor_index, const std::vector<PlaneTrack>& filter_planes,
+                          const std::vector<ExtractedPlane>& extracted,
+                          std::vector<PlaneEstimate>* estimates);
 
 struct PlaneMapErrors {
   int planes_evaluated = 0;  // seen >= min_seen_s and associated with a true plane

@@ -97,4 +97,14 @@ StatusOr<TrajectoryErrors> EvaluateTrajectory(const std::vector<TimedPose>& esti
   return e;
 }
 
+std::vector<TimedPose> TruthPoses(const GroundTruth& gt) {
+  std::vector<TimedPose> truth;
+  truth.reserve(gt.frames.size());
+  for (size_t i = 0; i < gt.frames.size(); ++i) {
+    truth.push_back(
+        {static_cast<int64_t>(i), gt.frames[i].timestamp_s, gt.frames[i].world_from_cam});
+  }
+  return truth;
+}
+
 }  // namespace slapse

@@ -9,6 +9,7 @@
 
 #include "core/common/rigid3.h"
 #include "core/common/status.h"
+#include "core/sim/ground_truth.h"
 
 namespace slapse {
 
@@ -47,5 +48,8 @@ struct TrajectoryErrors {
 // skipped. Needs >= 3 matched poses.
 StatusOr<TrajectoryErrors> EvaluateTrajectory(const std::vector<TimedPose>& estimate,
                                               const std::vector<TimedPose>& truth);
+
+// The true camera pose of every frame of a simulated drive.
+std::vector<TimedPose> TruthPoses(const GroundTruth& gt);
 
 }  // namespace slapse
