@@ -94,6 +94,24 @@ TEST(EkfJacobians, ObservationMatchesFiniteDifferences) {
   }
 }
 
+TEST(EkfJacobians, RoadHeightChangeMatchesFiniteDifferences) {
+  Fixture fx;
+  const Eigen::Vector3d road_pi(0.01, 0.66, -0.03);
+  Eigen::RowVector3d d_t, d_pi;
+  PlaneEkf::RoadHeightChange(road_pi, fx.t, &d_t, &d_pi);
+  using Args = std::pair<Eigen::Vector3d, Eigen::Vector3d>;
+  auto f = [&](const Args& a) {
+    return Eigen::VectorXd::Constant(
+        1, PlaneEkf::RoadHeightChange(a.first, a.second, nullptr, nullptr));
+  };
+  const Eigen::MatrixXd n_t = NumericJacobian(
+      f, [&](const Eigen::VectorXd& d) { return Args(road_pi, fx.t + d); }, 3);
+  const Eigen::MatrixXd n_pi = NumericJacobian(
+      f, [&](const Eigen::VectorXd& d) { return Args(road_pi + d, fx.t); }, 3);
+  EXPECT_LT((n_t - d_t).norm(), 1e-8) << n_t << "\n\n" << d_t;
+  EXPECT_LT((n_pi - d_pi).norm(), 1e-8) << n_pi << "\n\n" << d_pi;
+}
+
 TEST(EkfJacobians, PredictionMatchesFiniteDifferencesOfTheErrorState) {
   Fixture fx;
   EkfState x;
@@ -255,6 +273,7 @@ TEST(PlaneEkfTest, EstablishedPlanesPinTheScaleThroughUpdates) {
     std::mt19937_64 rng(11);
     EkfOptions opts;
     opts.pin_scale_min_observations = pin;
+    opts.road_pins_scale = false;  // all established planes pin (the road alone: below)
     PlaneEkf ekf(K, opts);
     ASSERT_TRUE(ekf.Initialize(poses[0].Inverse() * poses[1], dt).ok());
     double max_mean_change = 0.0;
@@ -300,7 +319,9 @@ TEST(PlaneEkfTest, PlaneLifeCycleAndBadInput) {
   const Intrinsics K = Intrinsics::FromHorizontalFov(640, 480, 70);
   const auto poses = DrivePoses(3, 1.0);
   std::mt19937_64 rng(6);
-  PlaneEkf ekf(K);
+  EkfOptions opts;
+  opts.road_coast_updates = 0;  // the road is removed like any other plane (see below)
+  PlaneEkf ekf(K, opts);
   EXPECT_EQ(ekf.Update({}, nullptr).code(), StatusCode::kFailedPrecondition);
   ASSERT_TRUE(ekf.Initialize(poses[0].Inverse() * poses[1], 0.1).ok());
   const WorldPlane road{{0, -1, 0}, -1.5}, wall{{1, 0, 0}, -6.0};
@@ -329,6 +350,81 @@ TEST(PlaneEkfTest, PlaneLifeCycleAndBadInput) {
   const Status s = ekf.Update({nan_obs}, &rep);
   EXPECT_EQ(s.code(), StatusCode::kInternal) << s.ToString();
   EXPECT_TRUE(ekf.planes()[0].pi.allFinite());
+}
+
+// The road stays in the state through gaps in its observations, comes back
+// under a new track id as the same plane, and keeps its distance; a road-like
+// plane at another height is a new plane; past road_coast_updates missed
+// updates the road is removed.
+TEST(PlaneEkfTest, RoadCoastsThroughGapsAndIsReidentified) {
+  const Intrinsics K = Intrinsics::FromHorizontalFov(640, 480, 70);
+  const double dt = 4.0 / 30.0, step_m = 1.2;
+  const int steps = 14;
+  const auto poses = DrivePoses(steps, step_m);
+  const WorldPlane road{{0, -1, 0}, -1.5}, left{{1, 0, 0}, -6.0}, right{{-1, 0, 0}, -8.0};
+  const WorldPlane low_road{{0, -1, 0}, -3.0};  // road-like, twice as far below
+  std::mt19937_64 rng(12);
+  EkfOptions opts;
+  opts.road_coast_updates = 4;
+  PlaneEkf ekf(K, opts);
+  ASSERT_TRUE(ekf.Initialize(poses[0].Inverse() * poses[1], dt).ok());
+  auto road_track = [&]() -> const PlaneTrack* {
+    for (const PlaneTrack& p : ekf.planes()) {
+      if (p.road) return &p;
+    }
+    return nullptr;
+  };
+  for (int k = 1; k <= steps; ++k) {
+    if (k > 1) ASSERT_TRUE(ekf.Predict(dt).ok());
+    std::vector<PlaneObservation> obs;
+    obs.push_back(Observe(K, poses[k - 1], poses[k], left, 1, 0.2, rng));
+    obs.push_back(Observe(K, poses[k - 1], poses[k], right, 2, 0.2, rng));
+    // Road: id 0 at steps 1-4, missing at 5-7, id 10 from step 8 on; the low
+    // road-like plane (id 11) at step 10.
+    if (k <= 4) obs.push_back(Observe(K, poses[k - 1], poses[k], road, 0, 0.2, rng));
+    if (k >= 8) obs.push_back(Observe(K, poses[k - 1], poses[k], road, 10, 0.2, rng));
+    if (k == 10) obs.push_back(Observe(K, poses[k - 1], poses[k], low_road, 11, 0.2, rng));
+    const bool road_seen = k <= 4 || k >= 8;
+    const double road_norm_before = road_track() != nullptr ? road_track()->pi.norm() : 0.0;
+    const bool road_pins = road_seen && road_track() != nullptr &&
+                           road_track()->observations >= opts.pin_scale_min_observations;
+    UpdateReport rep;
+    ASSERT_TRUE(ekf.Update(obs, &rep).ok()) << "step " << k;
+    ASSERT_NE(road_track(), nullptr) << "step " << k;
+    // An established road alone pins the scale: its |pi| goes through the
+    // update unchanged.
+    if (road_pins) {
+      EXPECT_NEAR(road_track()->pi.norm(), road_norm_before, 1e-9 * road_norm_before)
+          << "step " << k;
+    }
+    EXPECT_EQ(road_track()->track_id, 0) << "step " << k;
+    EXPECT_EQ(rep.road_coasting, k >= 5 && k <= 7) << "step " << k;
+    EXPECT_EQ(road_track()->missed_updates, k >= 5 && k <= 7 ? k - 4 : 0) << "step " << k;
+    EXPECT_EQ(rep.planes_reidentified, k == 8 ? 1 : 0) << "step " << k;
+    if (k >= 8) {
+      EXPECT_EQ(ekf.FilterTrackId(10), 0);
+      // Updated with the road's observation: road and both facades.
+      EXPECT_EQ(rep.planes_updated, 3) << "step " << k;
+    }
+    if (k == 10) {
+      EXPECT_EQ(rep.planes_added, 1);  // the low plane: not the road
+      EXPECT_EQ(ekf.FilterTrackId(11), 11);
+    }
+  }
+  // The road's distance after the gap, against the truth (1.5 m in the
+  // filter's scale: the first step was given with its true length).
+  EXPECT_NEAR(1.0 / road_track()->pi.norm(), 1.5, 0.03 * 1.5);
+  EXPECT_GT(road_track()->observations, 8);
+
+  // Past the coasting limit the road goes.
+  for (int k = 1; k <= 5; ++k) {
+    ASSERT_TRUE(ekf.Predict(dt).ok());
+    UpdateReport rep;
+    ASSERT_TRUE(
+        ekf.Update({Observe(K, poses[steps - 1], poses[steps], left, 1, 0.2, rng)}, &rep).ok());
+    EXPECT_EQ(road_track() != nullptr, k <= 4) << "missed update " << k;
+  }
+  EXPECT_EQ(ekf.FilterTrackId(10), 10);  // the alias went with its track
 }
 
 TEST(PlaneEkfTest, RescaleMultipliesLengths) {

@@ -110,7 +110,7 @@ int RunRun(int argc, char** argv) {
     std::fprintf(
         steps_csv.get(),
         "later_index,tracking,step_length,kept,filter_planes,updated,added,removed,rejected,"
-        "reassociated,rms_residual_px,extracted,note\n");
+        "reassociated,reidentified,road_coasting,rms_residual_px,extracted,note\n");
   }
   Pipeline pipeline(*intrinsics, info.mv_sigma_px(), po);
   std::vector<PlaneEstimate> plane_estimates;
@@ -144,13 +144,15 @@ int RunRun(int argc, char** argv) {
                                                 traj[traj.size() - 2].world_from_cam.translation)
                                                    .norm()
                                              : 0.0;
-      std::fprintf(steps_csv.get(), "%lld,%d,%.4f,%d,%zu,%d,%d,%d,%d,%d,%.3f,%s,\"%s\"\n",
+      std::fprintf(steps_csv.get(), "%lld,%d,%.4f,%d,%zu,%d,%d,%d,%d,%d,%d,%d,%.3f,%s,\"%s\"\n",
                    static_cast<long long>(s.later_index), s.tracking ? 1 : 0, length, s.kept,
                    s.planes.size(), s.ekf.planes_updated, s.ekf.planes_added, s.ekf.planes_removed,
-                   s.ekf.planes_rejected, s.ekf.planes_reassociated, s.ekf.rms_residual_px,
-                   extracted.c_str(), s.note.c_str());
+                   s.ekf.planes_rejected, s.ekf.planes_reassociated, s.ekf.planes_reidentified,
+                   s.ekf.road_coasting ? 1 : 0, s.ekf.rms_residual_px, extracted.c_str(),
+                   s.note.c_str());
     }
-    AppendPlaneEstimates(s.later_index, s.planes, s.extracted, &plane_estimates);
+    AppendPlaneEstimates(s.later_index, s.planes, s.extracted, s.extracted_filter_ids,
+                         &plane_estimates);
   }
   if (progress) std::fprintf(stderr, "\n");
   const bool stream_ok = end.code() == StatusCode::kOutOfRange;

@@ -189,6 +189,10 @@ void PlaneEkf::RemovePlane(size_t index) {
   P.bottomLeftCorner(tail, o) = P_.bottomLeftCorner(tail, o);
   P.bottomRightCorner(tail, tail) = P_.bottomRightCorner(tail, tail);
   P_ = std::move(P);
+  const int id = planes_[index].track_id;
+  for (auto it = road_aliases_.begin(); it != road_aliases_.end();) {
+    it = it->second == id ? road_aliases_.erase(it) : std::next(it);
+  }
   planes_.erase(planes_.begin() + static_cast<std::ptrdiff_t>(index));
 }
 
@@ -212,7 +216,8 @@ void PlaneEkf::Rescale(double s) {
 // reprojection error. Its covariance follows the linearised solution
 // pi = g(z, motion):  P_pp = c N^-1 + G P_mm G^T (c >= 1 inflation), P_px = G P_mx, with
 // N = sum J_pi^T W J_pi and G = -N^-1 sum J_pi^T W J_m.
-bool PlaneEkf::AddPlane(const PlaneObservation& obs) {
+bool PlaneEkf::FitNewPlane(const PlaneObservation& obs, Eigen::Vector3d* pi_out,
+                           Eigen::Matrix3d* N_out, Eigen::Matrix<double, 3, 6>* JtWJm_out) const {
   const size_t m = obs.x_later_px.size();
   if (m < 4) return false;
   Eigen::MatrixXd A(3 * m, 3);
@@ -255,6 +260,43 @@ bool PlaneEkf::AddPlane(const PlaneObservation& obs) {
     pi += step;
     if (step.norm() < 1e-9 * pi.norm()) break;
   }
+  *pi_out = pi;
+  if (N_out != nullptr) *N_out = N;
+  if (JtWJm_out != nullptr) *JtWJm_out = JtWJm;
+  return true;
+}
+
+double PlaneEkf::RoadHeightChange(const Eigen::Vector3d& pi_road, const Eigen::Vector3d& t,
+                                  Eigen::RowVector3d* d_t, Eigen::RowVector3d* d_pi) {
+  if (d_t != nullptr) *d_t = pi_road.transpose();
+  if (d_pi != nullptr) *d_pi = t.transpose();
+  return pi_road.dot(t);
+}
+
+// Road-like: unit normal n = pi / |pi| within road_max_angle_deg of +y (the
+// camera's down axis), which with pi^T X = 1 puts the plane below the camera.
+bool PlaneEkf::IsRoadLike(const Eigen::Vector3d& pi) const {
+  const double norm = pi.norm();
+  return norm > 0 && pi.y() / norm >= std::cos(options_.road_max_angle_deg * M_PI / 180.0);
+}
+
+int PlaneEkf::RoadIndex() const {
+  for (size_t i = 0; i < planes_.size(); ++i) {
+    if (planes_[i].road) return static_cast<int>(i);
+  }
+  return -1;
+}
+
+int PlaneEkf::FilterTrackId(int observation_track_id) const {
+  const auto it = road_aliases_.find(observation_track_id);
+  return it == road_aliases_.end() ? observation_track_id : it->second;
+}
+
+bool PlaneEkf::AddPlane(const PlaneObservation& obs) {
+  Eigen::Vector3d pi;
+  Eigen::Matrix3d N;
+  Eigen::Matrix<double, 3, 6> JtWJm;
+  if (!FitNewPlane(obs, &pi, &N, &JtWJm)) return false;
   Eigen::Matrix3d N_inv;
   {
     Eigen::LLT<Eigen::Matrix3d> llt(N);
@@ -280,7 +322,12 @@ bool PlaneEkf::AddPlane(const PlaneObservation& obs) {
   P.block(0, n, n, 3) = P.block(n, 0, 3, n).transpose();
   P.block<3, 3>(n, n) = P_pp;
   P_ = std::move(P);
-  planes_.push_back({obs.track_id, pi, 1});
+  PlaneTrack track;
+  track.track_id = obs.track_id;
+  track.pi = pi;
+  track.observations = 1;
+  track.road = options_.road_coast_updates > 0 && RoadIndex() < 0 && IsRoadLike(pi);
+  planes_.push_back(track);
   return true;
 }
 
@@ -295,34 +342,79 @@ Status PlaneEkf::Update(const std::vector<PlaneObservation>& observations, Updat
       return InvalidArgumentError("plane observation with mismatched correspondence arrays");
     }
   }
-  // 1. Delete planes that found no correspondence set.
-  std::set<int> observed_ids;
-  for (const PlaneObservation& o : observations) observed_ids.insert(o.track_id);
+  // Observation track ids that were re-identified as the road refer to it;
+  // aliases of tracks that ended are forgotten.
+  std::vector<int> ids;
+  for (const PlaneObservation& o : observations) ids.push_back(FilterTrackId(o.track_id));
+  {
+    std::set<int> raw_ids;
+    for (const PlaneObservation& o : observations) raw_ids.insert(o.track_id);
+    for (auto it = road_aliases_.begin(); it != road_aliases_.end();) {
+      it = raw_ids.count(it->first) ? std::next(it) : road_aliases_.erase(it);
+    }
+  }
+  // 1. Delete planes that found no correspondence set; the road coasts.
+  const std::set<int> observed_ids(ids.begin(), ids.end());
   for (size_t i = planes_.size(); i-- > 0;) {
-    if (!observed_ids.count(planes_[i].track_id)) {
+    PlaneTrack& plane = planes_[i];
+    if (observed_ids.count(plane.track_id)) {
+      plane.missed_updates = 0;
+    } else if (plane.road && plane.missed_updates < options_.road_coast_updates) {
+      ++plane.missed_updates;
+      rep.road_coasting = true;
+    } else {
       RemovePlane(i);
       ++rep.planes_removed;
     }
   }
-  // 2. Update with the tracked planes' observations.
+  // 2. Update with the tracked planes' observations (a plane may have several:
+  // the road in two pieces).
   std::vector<std::pair<size_t, const PlaneObservation*>> tracked;
   std::vector<const PlaneObservation*> fresh;
-  for (const PlaneObservation& o : observations) {
+  for (size_t k = 0; k < observations.size(); ++k) {
     auto it = std::find_if(planes_.begin(), planes_.end(),
-                           [&](const PlaneTrack& p) { return p.track_id == o.track_id; });
+                           [&](const PlaneTrack& p) { return p.track_id == ids[k]; });
     if (it == planes_.end()) {
-      fresh.push_back(&o);
+      fresh.push_back(&observations[k]);
     } else {
-      tracked.emplace_back(static_cast<size_t>(it - planes_.begin()), &o);
+      tracked.emplace_back(static_cast<size_t>(it - planes_.begin()), &observations[k]);
+    }
+  }
+  // The road seen again under a new track id: a new plane (fitted with the
+  // predicted motion) with the kept road's normal and, within the allowed
+  // scale drift, its distance. Not gated by the innovation test below: after
+  // a gap the drifted scale is exactly what this observation corrects.
+  std::set<const PlaneObservation*> reidentified;
+  const int road = RoadIndex();
+  if (road >= 0) {
+    const Eigen::Vector3d& road_pi = planes_[road].pi;
+    const double cos_max = std::cos(options_.road_reid_max_angle_deg * M_PI / 180.0);
+    for (size_t k = fresh.size(); k-- > 0;) {
+      Eigen::Vector3d pi;
+      if (!FitNewPlane(*fresh[k], &pi, nullptr, nullptr) || !IsRoadLike(pi)) continue;
+      const double ratio = pi.norm() / road_pi.norm();
+      if (pi.normalized().dot(road_pi.normalized()) < cos_max ||
+          !(ratio <= options_.road_reid_max_distance_ratio &&
+            ratio >= 1.0 / options_.road_reid_max_distance_ratio)) {
+        continue;
+      }
+      road_aliases_[fresh[k]->track_id] = planes_[road].track_id;
+      planes_[road].missed_updates = 0;
+      rep.road_coasting = false;
+      tracked.emplace_back(static_cast<size_t>(road), fresh[k]);
+      reidentified.insert(fresh[k]);
+      fresh.erase(fresh.begin() + static_cast<std::ptrdiff_t>(k));
+      ++rep.planes_reidentified;
     }
   }
   // Association gate at the prior: a plane whose macroblocks sit far outside
   // the innovation covariance is a different surface under an old track id.
   if (options_.association_gate > 0) {
     const double extra2 = options_.extra_sigma_px * options_.extra_sigma_px;
-    for (size_t k = tracked.size(); k-- > 0;) {
-      const size_t index = tracked[k].first;
-      const PlaneObservation& obs = *tracked[k].second;
+    std::set<size_t> failed;
+    for (const auto& [index, obs_ptr] : tracked) {
+      if (reidentified.count(obs_ptr)) continue;
+      const PlaneObservation& obs = *obs_ptr;
       const int o = PlaneOffset(index);
       Eigen::Matrix<double, 9, 9> P9;
       P9.topLeftCorner<6, 6>() = P_.block<6, 6>(kTheta, kTheta);
@@ -347,14 +439,21 @@ Status PlaneEkf::Update(const std::vector<PlaneObservation>& observations, Updat
       }
       if (chi2.empty()) continue;
       std::nth_element(chi2.begin(), chi2.begin() + chi2.size() / 2, chi2.end());
-      if (chi2[chi2.size() / 2] <= options_.association_gate) continue;
+      if (chi2[chi2.size() / 2] > options_.association_gate) failed.insert(index);
+    }
+    // Failed planes are dropped and all their observations start new ones.
+    for (auto f = failed.rbegin(); f != failed.rend(); ++f) {
+      const size_t index = *f;
       RemovePlane(index);
-      for (auto& [i, o2] : tracked) {
-        if (i > index) --i;
-      }
-      fresh.push_back(tracked[k].second);
-      tracked.erase(tracked.begin() + static_cast<std::ptrdiff_t>(k));
       ++rep.planes_reassociated;
+      for (size_t k = tracked.size(); k-- > 0;) {
+        if (tracked[k].first == index) {
+          fresh.push_back(tracked[k].second);
+          tracked.erase(tracked.begin() + static_cast<std::ptrdiff_t>(k));
+        } else if (tracked[k].first > index) {
+          --tracked[k].first;
+        }
+      }
     }
   }
   rep.skipped = tracked.empty();
@@ -413,6 +512,24 @@ Status PlaneEkf::Update(const std::vector<PlaneObservation>& observations, Updat
         }
       }
       rep.measurements = count;
+      // The road's constant height (road_height_rel_sigma): the camera stays
+      // at the same distance above the road, so the step moves along it,
+      //   c(t, pi_road) = pi_road^T t = 0  (n^T t / d: the step's height
+      //   change relative to the height),
+      // a scalar pseudo-measurement with dc/dt = pi_road^T, dc/dpi_road = t^T.
+      // It holds while the road is coasting too (PlaneTrack::missed_updates).
+      if (const int road = RoadIndex(); road >= 0 && options_.road_height_rel_sigma > 0) {
+        const int o = PlaneOffset(static_cast<size_t>(road));
+        Eigen::RowVector3d d_t, d_pi;
+        const double r = -RoadHeightChange(planes_[road].pi, t_, &d_t, &d_pi);  // z = 0
+        const double w = 1.0 / (options_.road_height_rel_sigma * options_.road_height_rel_sigma);
+        info.block<3, 3>(kT, kT) += w * d_t.transpose() * d_t;
+        info.block<3, 3>(kT, o) += w * d_t.transpose() * d_pi;
+        info.block<3, 3>(o, kT) += w * d_pi.transpose() * d_t;
+        info.block<3, 3>(o, o) += w * d_pi.transpose() * d_pi;
+        rhs.segment<3>(kT) += w * r * d_t.transpose();
+        rhs.segment<3>(o) += w * r * d_pi.transpose();
+      }
       Eigen::LLT<Eigen::MatrixXd> llt(info);
       if (llt.info() != Eigen::Success) {
         R_ = R0, t_ = t0, w_ = w0, v_ = v0;
@@ -449,10 +566,26 @@ Status PlaneEkf::Update(const std::vector<PlaneObservation>& observations, Updat
     // whole state, so the update may move them relative to each other but
     // not all together.
     if (options_.pin_scale_min_observations > 0) {
+      // The planes that pin: the established road alone when it was observed
+      // (road_pins_scale: its distance is the one that stays constant), else
+      // every established plane.
+      std::set<size_t> pins;
+      for (const auto& [index, obs] : tracked) {
+        if (planes_[index].observations >= options_.pin_scale_min_observations &&
+            planes_[index].road && options_.road_pins_scale) {
+          pins.insert(index);
+        }
+      }
+      if (pins.empty()) {
+        for (const auto& [index, obs] : tracked) {
+          if (planes_[index].observations >= options_.pin_scale_min_observations) {
+            pins.insert(index);
+          }
+        }
+      }
       double log_sum = 0;
       int pinned = 0;
-      for (const auto& [index, obs] : tracked) {
-        if (planes_[index].observations < options_.pin_scale_min_observations) continue;
+      for (size_t index : pins) {
         const double before = pi0[index].norm(), after = planes_[index].pi.norm();
         if (!(before > 0 && after > 0)) continue;
         log_sum += std::log(after / before);
@@ -464,8 +597,10 @@ Status PlaneEkf::Update(const std::vector<PlaneObservation>& observations, Updat
         Rescale(rep.scale_correction);
       }
     }
-    for (const auto& [index, obs] : tracked) ++planes_[index].observations;
-    rep.planes_updated = static_cast<int>(tracked.size());
+    std::set<size_t> updated;
+    for (const auto& [index, obs] : tracked) updated.insert(index);
+    for (size_t index : updated) ++planes_[index].observations;
+    rep.planes_updated = static_cast<int>(updated.size());
   }
   // 3. Add the new planes with the updated motion.
   for (const PlaneObservation* o : fresh) {

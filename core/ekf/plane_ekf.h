@@ -31,6 +31,7 @@
 // in the number of macroblocks. P+ = (P-^-1 + sum H^T H / s^2)^-1 by LLT.
 #pragma once
 
+#include <map>
 #include <vector>
 
 #include <Eigen/Core>
@@ -77,6 +78,32 @@ struct EkfOptions {
   // Scale gauge (see Update): planes observed at least this often before an
   // update keep their common scale through it; 0 = off.
   int pin_scale_min_observations = 2;
+  // The road (beyond the paper). A car's camera stays at a constant height
+  // above one road plane, so the road is the one surface that never leaves
+  // the scene, and its pi stays put while the car drives along it
+  // (pi^T t ~ 0 in the transition). Plane extraction finds it in about two
+  // pairs of three and under a new track id after each gap; as a new plane it
+  // would inherit the drifted scale of the moment. Instead the filter keeps
+  // one road plane: a plane is road-like when its normal is within
+  // road_max_angle_deg of the camera's down axis (+y in C_k) and it lies
+  // below the camera; the first road-like plane added becomes the road. It
+  // stays in the state for up to road_coast_updates updates without
+  // observations (0: removed like any other plane), and a new road-like
+  // plane whose normal is within road_reid_max_angle_deg of it and whose
+  // distance is within a factor road_reid_max_distance_ratio (the scale may
+  // have drifted meanwhile: that is what the observation corrects) is taken
+  // as the road seen again. With road_pins_scale, an established road alone
+  // pins the scale (see pin_scale_min_observations).
+  double road_max_angle_deg = 20.0;
+  int road_coast_updates = 45;
+  double road_reid_max_angle_deg = 8.0;
+  double road_reid_max_distance_ratio = 1.5;
+  bool road_pins_scale = true;
+  // The car keeps its height above the road: each update adds the
+  // pseudo-measurement pi_road^T t = 0 (the step's height change relative to
+  // the camera height) with this standard deviation; 0 = off. 0.01: 1.5 cm
+  // per step at 1.5 m (bumps, suspension).
+  double road_height_rel_sigma = 0.01;
 };
 
 // One plane's macroblock correspondences between the previous anchor and the
@@ -92,6 +119,8 @@ struct PlaneTrack {
   int track_id = -1;
   Eigen::Vector3d pi = Eigen::Vector3d::Zero();  // n / d in the current camera frame
   int observations = 0;                          // updates it took part in
+  bool road = false;                             // the road plane (EkfOptions)
+  int missed_updates = 0;  // consecutive updates without an observation (road only)
 };
 
 // The nominal state: step motion, velocities and planes (n / d in C_k).
@@ -106,6 +135,8 @@ struct EkfState {
 struct UpdateReport {
   int planes_updated = 0, planes_added = 0, planes_removed = 0, planes_rejected = 0;
   int planes_reassociated = 0;  // failed the association gate: replaced by a new plane
+  int planes_reidentified = 0;  // new track ids taken as the kept road seen again
+  bool road_coasting = false;   // the road is kept without an observation
   int measurements = 0;
   double rms_residual_px = 0.0;  // after the update
   bool skipped = false;          // no tracked plane observed
@@ -130,6 +161,10 @@ class PlaneEkf {
   // is well determined by the updated motion. A numerically failing update
   // leaves the state as predicted and returns INTERNAL.
   Status Update(const std::vector<PlaneObservation>& observations, UpdateReport* report);
+
+  // The filter plane an observation's track id refers to: the id itself, or
+  // the kept road's id when that observation's track was re-identified as it.
+  int FilterTrackId(int observation_track_id) const;
 
   // Multiplies every length in the state by `s` (t, v scale by s; pi by 1/s).
   void Rescale(double s);
@@ -162,11 +197,25 @@ class PlaneEkf {
                            Eigen::Vector2d* x_earlier, Eigen::Matrix<double, 2, 3>* d_theta,
                            Eigen::Matrix<double, 2, 3>* d_t, Eigen::Matrix<double, 2, 3>* d_pi);
 
+  // The road's height change over a step relative to the height (the
+  // road_height_rel_sigma pseudo-measurement, 0 when the step moves along the
+  // road): c = pi_road^T t, with dc/dt = pi_road^T and dc/dpi_road = t^T.
+  static double RoadHeightChange(const Eigen::Vector3d& pi_road, const Eigen::Vector3d& t,
+                                 Eigen::RowVector3d* d_t, Eigen::RowVector3d* d_pi);
+
  private:
   static constexpr int kMotionDim = 12;
   int PlaneOffset(size_t index) const { return kMotionDim + 3 * static_cast<int>(index); }
   void RemovePlane(size_t index);
   bool AddPlane(const PlaneObservation& obs);
+  // The plane of a new observation given the current motion (Gauss-Newton on
+  // its transfer errors from the linear least-squares start), with the normal
+  // matrix N = sum J_pi^T W J_pi and sum J_pi^T W [J_theta J_t]. False when
+  // it is undetermined or behind the camera.
+  bool FitNewPlane(const PlaneObservation& obs, Eigen::Vector3d* pi, Eigen::Matrix3d* N,
+                   Eigen::Matrix<double, 3, 6>* JtWJm) const;
+  bool IsRoadLike(const Eigen::Vector3d& pi) const;
+  int RoadIndex() const;  // -1: none
 
   Intrinsics intrinsics_;
   Eigen::Matrix3d K_, K_inv_;
@@ -177,6 +226,7 @@ class PlaneEkf {
                   v_ = Eigen::Vector3d::Zero();
   std::vector<PlaneTrack> planes_;
   Eigen::MatrixXd P_;
+  std::map<int, int> road_aliases_;  // observation track id -> the road's track id
 };
 
 }  // namespace slapse

@@ -1,5 +1,6 @@
 #include "core/eval/plane_map_eval.h"
 
+#include <algorithm>
 #include <cmath>
 #include <map>
 
@@ -60,12 +61,17 @@ StatusOr<PlaneMapErrors> EvaluatePlaneMap(const std::vector<PlaneEstimate>& esti
 
 void AppendPlaneEstimates(int64_t anchor_index, const std::vector<PlaneTrack>& filter_planes,
                           const std::vector<ExtractedPlane>& extracted,
+                          const std::vector<int>& extracted_filter_ids,
                           std::vector<PlaneEstimate>* estimates) {
   for (const PlaneTrack& track : filter_planes) {
     PlaneEstimate e{anchor_index, track.track_id, track.pi, {}};
-    for (const ExtractedPlane& ex : extracted) {
-      if (ex.track_id == track.track_id) e.mb_indices = ex.mb_indices;
+    for (size_t i = 0; i < extracted.size() && i < extracted_filter_ids.size(); ++i) {
+      if (extracted_filter_ids[i] != track.track_id) continue;
+      e.mb_indices.insert(e.mb_indices.end(), extracted[i].mb_indices.begin(),
+                          extracted[i].mb_indices.end());
     }
+    std::sort(e.mb_indices.begin(), e.mb_indices.end());
+    e.mb_indices.erase(std::unique(e.mb_indices.begin(), e.mb_indices.end()), e.mb_indices.end());
     if (!e.mb_indices.empty()) estimates->push_back(std::move(e));
   }
 }

@@ -25,10 +25,13 @@ struct PlaneEstimate {
 };
 
 // Appends the filter's planes after the anchor pair ending at `anchor_index`,
-// each with the macroblocks it was extracted on in that pair; filter planes
-// not extracted in it (no macroblocks) are left out.
+// each with the macroblocks of the extracted planes that observed it in that
+// pair (extracted_filter_ids[i]: the filter track id extracted[i] observed,
+// PipelineStep::extracted_filter_ids); filter planes not observed in it (no
+// macroblocks) are left out.
 void AppendPlaneEstimates(int64_t anchor_index, const std::vector<PlaneTrack>& filter_planes,
                           const std::vector<ExtractedPlane>& extracted,
+                          const std::vector<int>& extracted_filter_ids,
                           std::vector<PlaneEstimate>* estimates);
 
 struct PlaneMapErrors {

@@ -138,6 +138,9 @@ PipelineStep Pipeline::Process(const AnchorPair& pair) {
       MaybeFixScaleFromRoad();
     }
     step.world_from_cam = world_from_cam_;
+    for (const ExtractedPlane& ex : step.extracted) {
+      step.extracted_filter_ids.push_back(ekf_.FilterTrackId(ex.track_id));
+    }
     step.planes = ekf_.planes();
   }
   step.metric = metric_;
@@ -147,6 +150,7 @@ PipelineStep Pipeline::Process(const AnchorPair& pair) {
 void Pipeline::RecordPlanes(const PipelineStep& step, const AnchorPair& pair) {
   const Eigen::Matrix3d R_wc = world_from_cam_.R();
   for (const PlaneTrack& track : ekf_.planes()) {
+    if (track.missed_updates > 0) continue;  // the road, kept without an observation
     MapPlane& mp = plane_map_[track.track_id];
     if (mp.track_id < 0) {
       mp.track_id = track.track_id;
@@ -164,7 +168,7 @@ void Pipeline::RecordPlanes(const PipelineStep& step, const AnchorPair& pair) {
     mp.observations = track.observations;
     mp.seen_indices.push_back(step.later_index);
     for (const ExtractedPlane& ex : step.extracted) {
-      if (ex.track_id != track.track_id) continue;
+      if (ekf_.FilterTrackId(ex.track_id) != track.track_id) continue;
       mp.mb_indices = ex.mb_indices;
       for (int i : ex.correspondence_indices) {
         if (mp.support_world.size() >= kMaxSupportPointsPerPlane) break;

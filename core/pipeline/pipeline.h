@@ -80,6 +80,10 @@ struct PipelineStep {
   Rigid3d world_from_cam;                 // pose of the later anchor
   int correspondences = 0, kept = 0;      // merged MBs, and those with parallax
   std::vector<ExtractedPlane> extracted;  // this pair's planes (MB sets, homographies)
+  // Per extracted plane: the track id of the filter plane it is an
+  // observation of (its own id, or the road's when the filter re-identified
+  // it as the road; PlaneEkf::FilterTrackId).
+  std::vector<int> extracted_filter_ids;
   // The filter's planes after this step (n / d in the later anchor's camera).
   std::vector<PlaneTrack> planes;
   UpdateReport ekf;
