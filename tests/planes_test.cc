@@ -870,5 +870,108 @@ TEST(PlaneExtractorTest, ScatteredBestModelIsSetAsideForACompactPlane) {
   EXPECT_EQ(result->unassigned_indices, all);
 }
 
+TEST(TrimBoundaryCellsTest, DropsOnlyLooseBlocksOnTheSetsBorder) {
+  // A 5x4 block set at columns 10-14, rows 10-13 of the 40x30 grid, one point
+  // per cell. Residuals: 0.1 px^2 everywhere but 0.9 px^2 at a border cell
+  // (10, 11), an interior cell (12, 11) and a border cell (14, 13).
+  const std::vector<int> cells = Rect(10, 14, 10, 13);
+  std::vector<int> mb_of = cells;
+  mb_of.push_back(5 * kCols + 5);  // a point outside the mask
+  std::vector<char> mask(mb_of.size(), 1);
+  mask.back() = 0;
+  std::vector<double> sq(mb_of.size(), 0.1);
+  auto index_of = [&](int c, int r) {
+    return static_cast<int>(std::find(mb_of.begin(), mb_of.end(), r * kCols + c) - mb_of.begin());
+  };
+  sq[index_of(10, 11)] = sq[index_of(12, 11)] = sq[index_of(14, 13)] = 0.9;
+  sq.back() = 100.0;
+
+  std::vector<char> kept = TrimBoundaryCells(mb_of, mask, sq, kCols, kRows, 0.5);
+  std::vector<char> expected = mask;
+  expected[index_of(10, 11)] = expected[index_of(14, 13)] = 0;
+  EXPECT_EQ(kept, expected);
+  // A looser threshold keeps all.
+  EXPECT_EQ(TrimBoundaryCells(mb_of, mask, sq, kCols, kRows, 1.0), mask);
+
+  // Cells without MVs left of the set do not make (10, 11) a border block.
+  std::vector<char> empty(kCols * kRows, 0);
+  for (int r = 9; r <= 14; ++r) empty[r * kCols + 9] = 1;
+  empty[9 * kCols + 10] = empty[9 * kCols + 11] = 1;  // above (10, 10) and (11, 10)
+  kept = TrimBoundaryCells(mb_of, mask, sq, kCols, kRows, 0.5, empty);
+  expected[index_of(10, 11)] = 1;
+  EXPECT_EQ(kept, expected);
+
+  // The grid's own border is no edge of the set.
+  const std::vector<int> corner = Rect(0, 2, 0, 2);
+  std::vector<char> corner_mask(corner.size(), 1);
+  std::vector<double> corner_sq(corner.size(), 0.9);
+  kept = TrimBoundaryCells(corner, corner_mask, corner_sq, kCols, kRows, 0.5);
+  // Cells (0-1, 0-1) have all their in-grid neighbours in the set; column 2
+  // and row 2 border on cells outside it.
+  for (size_t j = 0; j < corner.size(); ++j) {
+    EXPECT_EQ(kept[j], corner[j] % kCols <= 1 && corner[j] / kCols <= 1 ? 1 : 0) << corner[j];
+  }
+}
+
+TEST(PlaneExtractorTest, BoundaryTrimDropsEdgeBlocksThatFitLoosely) {
+  // An 8x6 patch on homography A whose right-hand column moves 0.8 px off A,
+  // alternately left and right (within eps_h = 1 px; a least-squares refit
+  // cannot absorb it): blocks straddling an edge, whose MVs mix two sides.
+  AnchorPair pair = EmptyGridPair();
+  const std::vector<int> patch = Rect(10, 16, 10, 15), edge = Rect(17, 17, 10, 15);
+  AddPatch(ExampleHomography(2.0), patch, &pair);
+  AddPatch(ExampleHomography(2.0), edge, &pair);
+  for (size_t i = patch.size(); i < pair.correspondences.size(); ++i) {
+    pair.correspondences[i].x_earlier_px.x() += i % 2 == 0 ? 0.8 : -0.8;
+  }
+  const std::vector<int> all = AllIndices(pair);
+
+  PlaneExtractor plain(PlaneExtractionOptions{});
+  auto result = plain.Process(pair, all);
+  ASSERT_TRUE(result.ok());
+  ASSERT_EQ(result->planes.size(), 1u);
+  EXPECT_EQ(result->planes[0].mb_indices.size(), patch.size() + edge.size());
+
+  PlaneExtractionOptions trim;
+  trim.boundary_residual_frac = 0.5;
+  PlaneExtractor trimming(trim);
+  result = trimming.Process(pair, all);
+  ASSERT_TRUE(result.ok());
+  ASSERT_EQ(result->planes.size(), 1u);
+  std::vector<int> patch_sorted = patch;
+  std::sort(patch_sorted.begin(), patch_sorted.end());
+  EXPECT_EQ(result->planes[0].mb_indices, patch_sorted);
+  EXPECT_EQ(result->unassigned_indices.size(), edge.size());
+}
+
+TEST(PlaneExtractorTest, DropEOutliersFitsOnlyEssentialInliers) {
+  SceneNoise noise;
+  noise.seed = 4;
+  const SyntheticPair s = MakePair(Frame0(), Frame1(), 0, noise);
+  const auto inf = ThresholdInfinity(s.pair.correspondences, TestIntrinsics(), {});
+  ASSERT_TRUE(inf.ok());
+  ASSERT_TRUE(inf->has_motion);
+  auto count_e_outliers = [&](const PlaneExtractionResult& r) {
+    int n = 0;
+    for (const ExtractedPlane& p : r.planes) {
+      for (int i : p.correspondence_indices) n += inf->e_inlier_mask[i] ? 0 : 1;
+    }
+    return n;
+  };
+  PlaneExtractionOptions options;
+  PlaneExtractor all_kept(options);
+  auto result = all_kept.Process(s.pair, *inf, TestIntrinsics());
+  ASSERT_TRUE(result.ok());
+  EXPECT_GT(count_e_outliers(*result), 0);  // the noisy street has some
+  const size_t num_planes = result->planes.size();
+
+  options.drop_e_outliers = true;
+  PlaneExtractor e_inliers(options);
+  result = e_inliers.Process(s.pair, *inf, TestIntrinsics());
+  ASSERT_TRUE(result.ok());
+  EXPECT_EQ(count_e_outliers(*result), 0);
+  EXPECT_EQ(result->planes.size(), num_planes);
+}
+
 }  // namespace
 }  // namespace slapse

@@ -124,7 +124,14 @@ int RunEvalPlanes(int argc, char** argv) {
         "fit free 8-parameter homographies (the paper's way), not ones "
         "consistent with the pair's motion",
         ""},
-       {"planes-csv", "FILE", "also write one CSV row per extracted plane (scores)", ""}});
+       {"planes-csv", "FILE", "also write one CSV row per extracted plane (scores)", ""},
+       {"boundary-frac", "F",
+        "drop border blocks with transfer error > F * eps_h (< 0: off; see "
+        "PlaneExtractionOptions)",
+        std::to_string(PlaneExtractionOptions{}.boundary_residual_frac)},
+       {"boundary-ignore-empty", "",
+        "with --boundary-frac: cells without MVs do not make a block a border block", ""},
+       {"drop-e-outliers", "", "fit planes to the essential matrix's inliers only", ""}});
   if (Status s = flags.Parse(argc, argv); !s.ok()) return Fail("eval-planes", s.message(), 2);
   if (flags.help_requested()) {
     std::printf("%s", flags.Usage().c_str());
@@ -134,7 +141,9 @@ int RunEvalPlanes(int argc, char** argv) {
   auto eps_list = ParseList(flags.GetString("eps-h"), "eps-h");
   auto duration = flags.GetDouble("duration-s", 1, 600);
   auto tau = flags.GetDouble("tau-inf", 0, 100);
-  for (const Status* s : {&seeds.status(), &eps_list.status(), &duration.status(), &tau.status()}) {
+  auto boundary_frac = flags.GetDouble("boundary-frac", -1, 10);
+  for (const Status* s : {&seeds.status(), &eps_list.status(), &duration.status(), &tau.status(),
+                          &boundary_frac.status()}) {
     if (!s->ok()) return Fail("eval-planes", s->message(), 2);
   }
   std::unique_ptr<std::FILE, int (*)(std::FILE*)> csv(nullptr, &std::fclose);
@@ -143,7 +152,9 @@ int RunEvalPlanes(int argc, char** argv) {
     if (!csv) return Fail("eval-planes", "cannot write " + flags.GetString("planes-csv"));
     std::fprintf(csv.get(),
                  "drive,later_index,track_id,tracked,mbs,mean_mb_row,gt_plane,gt_kind,purity,"
-                 "mixed_share,transfer_px,true_positive,rms_transfer_px,track_change\n");
+                 "mixed_share,transfer_px,true_positive,rms_transfer_px,track_change,"
+                 "mean_imvs,e_inlier_share,median_parallax_px,hole_share,boundary_share,"
+                 "fill_share,bbox_fill,near2,near3,back_fit,back_fit15\n");
   }
   std::vector<std::string> dirs;
   for (double seed : *seeds) {
@@ -167,6 +178,9 @@ int RunEvalPlanes(int argc, char** argv) {
     eo.extraction.eps_h_px = eps;
     eo.extraction.use_motion = !flags.Has("free-homography");
     eo.infinity.tau_inf_px = *tau;
+    eo.extraction.boundary_residual_frac = *boundary_frac;
+    if (flags.Has("drop-e-outliers")) eo.extraction.drop_e_outliers = true;
+    if (flags.Has("boundary-ignore-empty")) eo.extraction.boundary_ignore_empty = true;
     eo.planes_csv = csv.get();
     ExtractionStats total;
     for (const std::string& dir : dirs) {

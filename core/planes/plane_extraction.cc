@@ -122,6 +122,34 @@ std::vector<char> PeelSparseCells(const std::vector<int>& mb_of, const std::vect
   return kept;
 }
 
+}  // namespace
+
+std::vector<char> TrimBoundaryCells(const std::vector<int>& mb_of, const std::vector<char>& mask,
+                                    const std::vector<double>& sq_residuals, int mb_cols,
+                                    int mb_rows, double max_sq_residual,
+                                    const std::vector<char>& empty) {
+  std::vector<char> in_set(static_cast<size_t>(mb_cols) * mb_rows, 0);
+  for (size_t j = 0; j < mask.size(); ++j) {
+    if (mask[j]) in_set[mb_of[j]] = 1;
+  }
+  std::vector<char> kept = mask;
+  for (size_t j = 0; j < mask.size(); ++j) {
+    if (!mask[j] || sq_residuals[j] <= max_sq_residual) continue;
+    const int c0 = mb_of[j] % mb_cols, r0 = mb_of[j] / mb_cols;
+    bool interior = true;
+    for (int r = std::max(0, r0 - 1); r <= std::min(mb_rows - 1, r0 + 1); ++r) {
+      for (int c = std::max(0, c0 - 1); c <= std::min(mb_cols - 1, c0 + 1); ++c) {
+        const int cell = r * mb_cols + c;
+        interior = interior && (in_set[cell] || (!empty.empty() && empty[cell]));
+      }
+    }
+    if (!interior) kept[j] = 0;
+  }
+  return kept;
+}
+
+namespace {
+
 int CountSet(const std::vector<char>& mask) {
   return static_cast<int>(std::count(mask.begin(), mask.end(), 1));
 }
@@ -232,6 +260,17 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
                                                         const InfinityResult& infinity,
                                                         const Intrinsics& intrinsics) {
   const PairMotion motion{intrinsics, infinity.later_from_earlier};
+  if (options_.drop_e_outliers && infinity.has_motion &&
+      infinity.e_inlier_mask.size() == pair.correspondences.size()) {
+    std::vector<int> kept;
+    for (int i : infinity.kept_indices) {
+      if (i >= 0 && i < static_cast<int>(infinity.e_inlier_mask.size()) &&
+          infinity.e_inlier_mask[i]) {
+        kept.push_back(i);
+      }
+    }
+    return Process(pair, kept, &motion);
+  }
   return Process(pair, infinity.kept_indices, infinity.has_motion ? &motion : nullptr);
 }
 
@@ -322,6 +361,18 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
       best = {model, std::move(mask)};
       best_count = count;
       if (stable) break;
+    }
+    if (options_.boundary_residual_frac >= 0.0) {
+      // Edge blocks whose MVs fit only loosely: drop them, then keep the
+      // largest component of the rest (without peeling again).
+      HomographyEstimator::Residuals(x_later, x_earlier, best.model.H, &sq_residuals);
+      const double frac = options_.boundary_residual_frac;
+      best.mask = TrimBoundaryCells(
+          mb_of, best.mask, sq_residuals, pair.mb_cols, pair.mb_rows, frac * frac * max_sq_error,
+          options_.boundary_ignore_empty ? empty_cells : std::vector<char>());
+      best.mask = LargestComponent(mb_of, best.mask, pair.mb_cols, pair.mb_rows,
+                                   options_.connectivity_radius_mbs, empty_cells,
+                                   options_.max_empty_gap_mbs);
     }
     return best;
   };

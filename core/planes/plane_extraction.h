@@ -121,6 +121,19 @@ struct PlaneExtractionOptions {
   // (bench/table2.sh over seeds 1-10, mean eps_D 0.10 / 0.125 / 0.15 / 0.20 /
   // 0.25: 4.1 (seeds 1-5) / 2.8 / 2.5 / 3.2 / 3.7 %); Table I unchanged.
   double max_track_change = 0.15;
+  // Boundary trim (beyond the paper): after the refits, blocks on the border
+  // of the kept set (an 8-neighbour cell inside the grid not in the set) whose
+  // transfer error exceeds boundary_residual_frac * eps_h_px are dropped, and
+  // the largest component of the rest is kept. Border blocks mostly straddle
+  // an edge, and their MVs mix the two sides. < 0 turns the trim off.
+  double boundary_residual_frac = -1.0;
+  // Process(pair, infinity, ...) with a motion: fit only the E-inliers
+  // (InfinityResult::e_inlier_mask); the others are reported as unassigned
+  // by omission. Beyond the paper.
+  bool drop_e_outliers = false;
+  // Boundary trim: cells without any MV do not make a block a border block
+  // (only cells whose MVs belong elsewhere do).
+  bool boundary_ignore_empty = false;
 };
 
 // The relative motion of an anchor pair, when the epipolar geometry was
@@ -193,5 +206,14 @@ class PlaneExtractor {
   bool has_previous_ = false;
   int next_track_id_ = 0;
 };
+
+// `mask` (one entry per point, point j in MB cell mb_of[j]) without the points
+// whose squared residual exceeds max_sq_residual and whose cell lies on the
+// border of the mask's cells: some 8-neighbour cell inside the grid is not in
+// the mask. The grid's own border is no edge of the set.
+std::vector<char> TrimBoundaryCells(const std::vector<int>& mb_of, const std::vector<char>& mask,
+                                    const std::vector<double>& sq_residuals, int mb_cols,
+                                    int mb_rows, double max_sq_residual,
+                                    const std::vector<char>& empty = {});
 
 }  // namespace slapse
