@@ -215,7 +215,7 @@ StatusOr<ExtractionStats> EvaluateExtraction(const std::string& drive_dir,
                       options.extraction.eps_h_px, &shape);
         std::fprintf(options.planes_csv,
                      "%s,%lld,%d,%d,%zu,%.1f,%d,%s,%.3f,%.3f,%.3f,%d,%.3f,%.3f,"
-                     "%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f\n",
+                     "%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f\n",
                      drive_dir.c_str(), static_cast<long long>(pair->later_index), m.track_id,
                      p.tracked ? 1 : 0, p.mb_indices.size(), mean_row, m.gt_plane,
                      m.gt_plane >= 0 ? PlaneKindName(gt->planes[m.gt_plane].kind) : "none",
@@ -223,7 +223,8 @@ StatusOr<ExtractionStats> EvaluateExtraction(const std::string& drive_dir,
                      p.rms_transfer_px, p.track_change, shape.mean_imvs, shape.e_inlier_share,
                      shape.median_parallax_px, shape.hole_share, shape.boundary_share,
                      shape.fill_share, shape.bbox_fill, shape.near2, shape.near3, shape.back_fit,
-                     shape.back_fit15);
+                     shape.back_fit15,
+                     p.m_later ? std::abs(p.m_later->y()) / p.m_later->norm() : -1.0);
       }
     }
     prev_pair = *pair;

@@ -419,6 +419,24 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
 
   PlaneExtractionResult result;
   const int min_mbs = std::max(options_.min_mbs_per_plane, fitter->MinSamples());
+  // The street-scene prior on a plane's orientation (see the options).
+  // The vertical in this pair's later frame: the remembered one (in the
+  // earlier frame) rotated by the pair's motion.
+  if (used_motion != nullptr && pair.earlier_index == last_later_index_) {
+    down_ = (used_motion->later_from_earlier.R() * down_).normalized();
+  }
+  auto down_component = [&](const ExtractedPlane& plane) {
+    return std::abs(plane.m_later->dot(down_)) / plane.m_later->norm();
+  };
+  auto is_road = [&](const ExtractedPlane& plane) {
+    return down_component(plane) >= std::cos(options_.max_road_tilt_deg * M_PI / 180.0);
+  };
+  auto orientation_ok = [&](const ExtractedPlane& plane) {
+    if (options_.max_facade_tilt_deg < 0 || options_.max_road_tilt_deg < 0) return true;
+    if (!plane.m_later.has_value() || !(plane.m_later->norm() > 0)) return true;
+    return down_component(plane) <= std::sin(options_.max_facade_tilt_deg * M_PI / 180.0) ||
+           is_road(plane);
+  };
 
   // 1. Tracking.
   const bool can_track = has_previous_ && pair.earlier_index == last_later_index_;
@@ -463,7 +481,7 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
       }
       if (static_cast<int>(plane.mb_indices.size()) < min_mbs ||
           subset_inliers < options_.min_track_overlap * static_cast<double>(subset.size()) ||
-          plane.track_change > options_.max_track_change) {
+          plane.track_change > options_.max_track_change || !orientation_ok(plane)) {
         ++result.num_tracks_lost;
         continue;
       }
@@ -481,11 +499,13 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
     if (!report.success) break;
     const Consensus consensus = post_process(report);
     ExtractedPlane plane = make_plane(consensus, next_track_id_, /*tracked=*/false);
-    if (static_cast<int>(plane.mb_indices.size()) < min_mbs) {
+    const bool too_small = static_cast<int>(plane.mb_indices.size()) < min_mbs;
+    if (too_small || !orientation_ok(plane)) {
       // Too small. Without connectivity the best model is the biggest there
       // is: stop. With it, the model's inliers may be scattered blocks; set
-      // them aside and look for a compact plane among the rest.
-      if (options_.connectivity_radius_mbs <= 0 || report.support < min_mbs ||
+      // them aside and look for a compact plane among the rest. The same
+      // for a plane the orientation prior rejects.
+      if ((too_small && options_.connectivity_radius_mbs <= 0) || report.support < min_mbs ||
           failed_discoveries >= options_.max_failed_discoveries) {
         break;
       }
@@ -502,6 +522,21 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
   result.unassigned_indices.insert(result.unassigned_indices.end(), set_aside.begin(),
                                    set_aside.end());
   std::sort(result.unassigned_indices.begin(), result.unassigned_indices.end());
+
+  // The road planes' normals refine the vertical (a running mean, weighted
+  // by blocks; a new estimate moves it by at most half).
+  Eigen::Vector3d road_sum = Eigen::Vector3d::Zero();
+  double road_blocks = 0;
+  for (const ExtractedPlane& plane : result.planes) {
+    if (!plane.m_later.has_value() || !(plane.m_later->norm() > 0) || !is_road(plane)) continue;
+    const Eigen::Vector3d n = plane.m_later->normalized();
+    road_sum += static_cast<double>(plane.mb_indices.size()) * (n.dot(down_) >= 0 ? n : -n);
+    road_blocks += static_cast<double>(plane.mb_indices.size());
+  }
+  if (road_blocks > 0) {
+    const double weight = road_blocks / (road_blocks + 100.0);  // 100 blocks: half way
+    down_ = ((1.0 - weight) * down_ + weight * road_sum.normalized()).normalized();
+  }
 
   // 3. Remember the planes' MB cells in this pair's later anchor.
   tracks_.clear();
