@@ -404,6 +404,27 @@ TEST(RansacSampleSubsetTest, EmptyTooSmallOrInvalidSubsetGivesNoModel) {
   EXPECT_TRUE(ransac.Estimate(t.x, t.y, &four).success);
 }
 
+// Polish: no random search; a perturbed model (say, the previous frame's) is
+// refitted onto the inliers, the best of several wins, and a model explaining
+// nothing fails.
+TEST(RansacPolishTest, PolishesTheBestOfGivenModels) {
+  const NoisyProblem p = MakeNoisyProblem(/*seed=*/17, 300, 0.4);
+  RansacOptions options;
+  options.max_error = 2.0;
+  const auto full = Ransac<HomographyEstimator>(options).Estimate(p.x, p.y);
+  ASSERT_TRUE(full.success);
+  Eigen::Matrix3d off = TrueHomography();
+  off(0, 2) += 3.0;  // 3 px sideways
+  const Eigen::Matrix3d far = Eigen::Vector3d(1, 2, 3).asDiagonal();
+  const auto polished = Ransac<HomographyEstimator>(options).Polish(p.x, p.y, {far, off});
+  ASSERT_TRUE(polished.success);
+  EXPECT_EQ(polished.num_trials, 0);
+  EXPECT_GE(polished.support, full.support - 3);
+  EXPECT_LT(MaxTransferDifferencePx(polished.model, TrueHomography()), 0.75);
+  EXPECT_FALSE(Ransac<HomographyEstimator>(options).Polish(p.x, p.y, {far}).success);
+  EXPECT_FALSE(Ransac<HomographyEstimator>(options).Polish(p.x, p.y, {}).success);
+}
+
 TEST(RansacTest, RejectsBrokenInput) {
   const TwoPlanes t = MakeTwoPlanes();
   RansacOptions options;  // max_error = 0: invalid

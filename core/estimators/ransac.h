@@ -187,7 +187,49 @@ class Ransac {
     }
     report.num_trials = trial;
     if (best_support < kSample) return report;
+    Finish(X, Y, max_sq_error, &report);
+    return report;
+  }
 
+  // No random search: every model of `initial_models` (e.g. the previous
+  // frame's model, or one from another estimator) is scored on all points and,
+  // with local_optimization, polished as a so-far-best hypothesis would be;
+  // the report is the best of them (num_trials = 0), as Estimate's would be
+  // with these as its only hypotheses. Failure as Estimate's (sizes differ,
+  // max_error <= 0, or fewer than kMinNumSamples inliers).
+  Report Polish(const std::vector<X_t>& X, const std::vector<Y_t>& Y,
+                const std::vector<M_t>& initial_models) const {
+    Report report;
+    if (X.size() != Y.size() || !(options_.max_error > 0.0)) return report;
+    const double max_sq_error = options_.max_error * options_.max_error;
+    std::vector<double> residuals;
+    double best_cost = std::numeric_limits<double>::infinity();
+    int best_support = 0;
+    for (const M_t& initial : initial_models) {
+      M_t model = initial;
+      Estimator::Residuals(X, Y, model, &residuals);
+      double cost = TruncatedCost(residuals, max_sq_error);
+      if (options_.local_optimization) {
+        cost = LocallyOptimize(X, Y, max_sq_error, &model, &residuals);
+      }
+      if (!(cost < best_cost)) continue;
+      best_cost = cost;
+      best_support = CountInliers(residuals, max_sq_error);
+      report.model = model;
+    }
+    if (best_support < Estimator::kMinNumSamples) return report;
+    Finish(X, Y, max_sq_error, &report);
+    return report;
+  }
+
+ private:
+  // The inlier mask and support of report.model; success iff the support is
+  // at least kMinNumSamples.
+  static void Finish(const std::vector<X_t>& X, const std::vector<Y_t>& Y, double max_sq_error,
+                     Report* report_out) {
+    Report& report = *report_out;
+    const int num_points = static_cast<int>(X.size());
+    std::vector<double> residuals;
     Estimator::Residuals(X, Y, report.model, &residuals);
     report.inlier_mask.assign(num_points, 0);
     report.support = 0;
@@ -197,12 +239,10 @@ class Ransac {
         ++report.support;
       }
     }
-    report.success = report.support >= kSample;
+    report.success = report.support >= Estimator::kMinNumSamples;
     if (!report.success) report.inlier_mask.clear();
-    return report;
   }
 
- private:
   // Least-squares refits of `model`, kept while they lower the MSAC cost at
   // max_error. The first refits take the inliers at kLoThresholdMultipliers x
   // max_error (widest first): a model from a noisy minimal sample is often off
