@@ -12,6 +12,14 @@
 //   // One squared residual per point (may be +infinity).
 //   static void Residuals(const std::vector<X_t>& X, const std::vector<Y_t>& Y,
 //                         const M_t& model, std::vector<double>* squared_residuals);
+//   // Optional: a scorer that prepares the points once per Estimate / Polish
+//   // call (e.g. as structure-of-arrays for vectorised arithmetic) and then
+//   // gives the same squared residuals as Residuals on them.
+//   class Scorer {
+//    public:
+//     Scorer(const std::vector<X_t>& X, const std::vector<Y_t>& Y);
+//     void Residuals(const M_t& model, std::vector<double>* squared_residuals) const;
+//   };
 //
 // Semantics of Ransac::Estimate(X, Y, sample_from):
 //  - Minimal samples are drawn only from the indices in `sample_from` (all
@@ -32,6 +40,19 @@
 //    inlier); the polished model then competes in the ranking, so hypotheses
 //    are not ranked by the luck of their minimal sample's noise.
 //    The reported support and mask are those of the final model.
+//  - Local sampling (Estimate's `neighbours`, NAPSAC-like; null: uniform as
+//    above): a sample is one pool point drawn uniformly plus kMinNumSamples - 1
+//    distinct points drawn uniformly from its neighbours that are in the pool
+//    (from the whole pool when it has fewer such neighbours than that, so any
+//    structure can still be sampled). Structures that are spatially compact
+//    (planes in an image) are then sampled whole far more often. The number
+//    of trials adapts to the probability that such a sample is all-inlier
+//    under the best model so far, computed exactly from its inlier mask:
+//      p = (1 / |pool|) sum over pool inliers i of
+//          prod_{k < kMinNumSamples - 1} (a_i - k) / (b_i - k),
+//    b_i (a_i) the number of i's pool neighbours (that are inliers), or of
+//    the other pool points (inliers) for an isolated i, and
+//    N = log(1 - confidence) / log(1 - p), clamped as above.
 //  - Deterministic: a fresh std::mt19937_64 seeded with `seed` per call, and an
 //    own unbiased index helper (std::uniform_int_distribution's output is
 //    implementation-defined, so results would differ between standard libraries).
@@ -46,6 +67,7 @@
 #include <cstdint>
 #include <limits>
 #include <random>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -101,6 +123,29 @@ inline int RansacNumTrials(double inlier_ratio, int sample_size, double confiden
   return std::max(min_num_trials, static_cast<int>(n));
 }
 
+// The estimator's Scorer if it has one, else one that calls its Residuals.
+template <typename Estimator, typename = void>
+class ScorerFor {
+ public:
+  ScorerFor(const std::vector<typename Estimator::X_t>& X,
+            const std::vector<typename Estimator::Y_t>& Y)
+      : X_(X), Y_(Y) {}
+  void Residuals(const typename Estimator::M_t& model,
+                 std::vector<double>* squared_residuals) const {
+    Estimator::Residuals(X_, Y_, model, squared_residuals);
+  }
+
+ private:
+  const std::vector<typename Estimator::X_t>& X_;
+  const std::vector<typename Estimator::Y_t>& Y_;
+};
+
+template <typename Estimator>
+class ScorerFor<Estimator, std::void_t<typename Estimator::Scorer>> : public Estimator::Scorer {
+ public:
+  using Estimator::Scorer::Scorer;
+};
+
 }  // namespace internal
 
 template <typename Estimator>
@@ -116,8 +161,11 @@ class Ransac {
 
   explicit Ransac(const RansacOptions& options) : options_(options) {}
 
+  // neighbours: null, or one list per point (indices into X) for local
+  // sampling (see the file comment).
   Report Estimate(const std::vector<X_t>& X, const std::vector<Y_t>& Y,
-                  const std::vector<int>* sample_from = nullptr) const {
+                  const std::vector<int>* sample_from = nullptr,
+                  const std::vector<std::vector<int>>* neighbours = nullptr) const {
     Report report;
     constexpr int kSample = Estimator::kMinNumSamples;
     const int num_points = static_cast<int>(X.size());
@@ -138,11 +186,30 @@ class Ransac {
     }
     const int pool_size = static_cast<int>(pool.size());
     if (pool_size < kSample) return report;
+    if (neighbours != nullptr && neighbours->size() != X.size()) return report;
+
+    // Local sampling: each pool point's neighbours within the pool, flattened
+    // (point pool[k]'s are local_nb[local_begin[k] .. local_begin[k + 1])).
+    std::vector<int> local_begin, local_nb, scratch;
+    std::vector<char> in_pool;
+    if (neighbours != nullptr) {
+      in_pool.assign(num_points, 0);
+      for (int i : pool) in_pool[i] = 1;
+      local_begin.reserve(pool_size + 1);
+      for (int i : pool) {
+        local_begin.push_back(static_cast<int>(local_nb.size()));
+        for (int j : (*neighbours)[i]) {
+          if (j >= 0 && j < num_points && j != i && in_pool[j]) local_nb.push_back(j);
+        }
+      }
+      local_begin.push_back(static_cast<int>(local_nb.size()));
+    }
 
     const double max_sq_error = options_.max_error * options_.max_error;
     const int min_trials = std::max(0, options_.min_num_trials);
     const int max_trials = std::max(min_trials, options_.max_num_trials);
 
+    const internal::ScorerFor<Estimator> scorer(X, Y);
     std::mt19937_64 rng(options_.seed);
     std::vector<X_t> sample_x(kSample);
     std::vector<Y_t> sample_y(kSample);
@@ -155,18 +222,46 @@ class Ransac {
     int trial = 0;
     for (; trial < max_trials; ++trial) {
       if (trial >= min_trials && trial >= dynamic_max_trials) break;
-      // Partial Fisher-Yates: pool[0..kSample) becomes a uniform random sample
-      // (valid from any current order of the pool).
-      for (int s = 0; s < kSample; ++s) {
-        const int j = s + static_cast<int>(internal::UniformIndex(rng, pool_size - s));
-        std::swap(pool[s], pool[j]);
-        sample_x[s] = X[pool[s]];
-        sample_y[s] = Y[pool[s]];
+      if (neighbours == nullptr) {
+        // Partial Fisher-Yates: pool[0..kSample) becomes a uniform random sample
+        // (valid from any current order of the pool).
+        for (int s = 0; s < kSample; ++s) {
+          const int j = s + static_cast<int>(internal::UniformIndex(rng, pool_size - s));
+          std::swap(pool[s], pool[j]);
+          sample_x[s] = X[pool[s]];
+          sample_y[s] = Y[pool[s]];
+        }
+      } else {
+        // The pool keeps its order here: local_begin is indexed by position.
+        const int k = static_cast<int>(internal::UniformIndex(rng, pool_size));
+        const int num_nb = local_begin[k + 1] - local_begin[k];
+        sample_x[0] = X[pool[k]];
+        sample_y[0] = Y[pool[k]];
+        if (num_nb >= kSample - 1) {
+          scratch.assign(local_nb.begin() + local_begin[k], local_nb.begin() + local_begin[k + 1]);
+          for (int s = 0; s < kSample - 1; ++s) {
+            const int j = s + static_cast<int>(internal::UniformIndex(rng, num_nb - s));
+            std::swap(scratch[s], scratch[j]);
+            sample_x[s + 1] = X[scratch[s]];
+            sample_y[s + 1] = Y[scratch[s]];
+          }
+        } else {
+          // An isolated point: the rest of the sample from the whole pool
+          // (distinct positions, by rejection).
+          scratch.assign(1, k);
+          while (static_cast<int>(scratch.size()) < kSample) {
+            const int j = static_cast<int>(internal::UniformIndex(rng, pool_size));
+            if (std::find(scratch.begin(), scratch.end(), j) != scratch.end()) continue;
+            sample_x[scratch.size()] = X[pool[j]];
+            sample_y[scratch.size()] = Y[pool[j]];
+            scratch.push_back(j);
+          }
+        }
       }
       models.clear();
       Estimator::Estimate(sample_x, sample_y, &models);
       for (const M_t& model : models) {
-        Estimator::Residuals(X, Y, model, &residuals);
+        scorer.Residuals(model, &residuals);
         double cost = TruncatedCost(residuals, max_sq_error);
         if (!(cost < best_cost)) continue;
         report.model = model;
@@ -174,20 +269,48 @@ class Ransac {
           // LO-RANSAC: polish every new so-far-best model (this only lowers its
           // cost), so that hypotheses are ranked by their refitted cost, not by
           // the luck of the minimal sample's noise.
-          cost = LocallyOptimize(X, Y, max_sq_error, &report.model, &residuals);
+          cost = LocallyOptimize(X, Y, scorer, max_sq_error, &report.model, &residuals);
         }
         best_cost = cost;
         best_support = CountInliers(residuals, max_sq_error);
-        int pool_inliers = 0;
-        for (int i : pool) pool_inliers += residuals[i] <= max_sq_error ? 1 : 0;
-        dynamic_max_trials =
-            internal::RansacNumTrials(static_cast<double>(pool_inliers) / pool_size, kSample,
-                                      options_.confidence, min_trials, max_trials);
+        if (neighbours == nullptr) {
+          int pool_inliers = 0;
+          for (int i : pool) pool_inliers += residuals[i] <= max_sq_error ? 1 : 0;
+          dynamic_max_trials =
+              internal::RansacNumTrials(static_cast<double>(pool_inliers) / pool_size, kSample,
+                                        options_.confidence, min_trials, max_trials);
+        } else {
+          // p(all-inlier local sample), see the file comment; as a "ratio"
+          // with sample size 1.
+          int pool_inliers = 0;
+          for (int i : pool) pool_inliers += residuals[i] <= max_sq_error ? 1 : 0;
+          double p_sum = 0.0;
+          for (int k = 0; k < pool_size; ++k) {
+            if (!(residuals[pool[k]] <= max_sq_error)) continue;
+            int b = local_begin[k + 1] - local_begin[k];
+            int a = 0;
+            if (b >= kSample - 1) {
+              for (int q = local_begin[k]; q < local_begin[k + 1]; ++q) {
+                a += residuals[local_nb[q]] <= max_sq_error ? 1 : 0;
+              }
+            } else {  // isolated: the rest from the pool
+              b = pool_size - 1;
+              a = pool_inliers - 1;
+            }
+            double prod = 1.0;
+            for (int s = 0; s < kSample - 1; ++s) {
+              prod *= static_cast<double>(std::max(0, a - s)) / (b - s);
+            }
+            p_sum += prod;
+          }
+          dynamic_max_trials = internal::RansacNumTrials(p_sum / pool_size, 1, options_.confidence,
+                                                         min_trials, max_trials);
+        }
       }
     }
     report.num_trials = trial;
     if (best_support < kSample) return report;
-    Finish(X, Y, max_sq_error, &report);
+    Finish(scorer, static_cast<int>(X.size()), max_sq_error, &report);
     return report;
   }
 
@@ -202,15 +325,16 @@ class Ransac {
     Report report;
     if (X.size() != Y.size() || !(options_.max_error > 0.0)) return report;
     const double max_sq_error = options_.max_error * options_.max_error;
+    const internal::ScorerFor<Estimator> scorer(X, Y);
     std::vector<double> residuals;
     double best_cost = std::numeric_limits<double>::infinity();
     int best_support = 0;
     for (const M_t& initial : initial_models) {
       M_t model = initial;
-      Estimator::Residuals(X, Y, model, &residuals);
+      scorer.Residuals(model, &residuals);
       double cost = TruncatedCost(residuals, max_sq_error);
       if (options_.local_optimization) {
-        cost = LocallyOptimize(X, Y, max_sq_error, &model, &residuals);
+        cost = LocallyOptimize(X, Y, scorer, max_sq_error, &model, &residuals);
       }
       if (!(cost < best_cost)) continue;
       best_cost = cost;
@@ -218,19 +342,18 @@ class Ransac {
       report.model = model;
     }
     if (best_support < Estimator::kMinNumSamples) return report;
-    Finish(X, Y, max_sq_error, &report);
+    Finish(scorer, static_cast<int>(X.size()), max_sq_error, &report);
     return report;
   }
 
  private:
   // The inlier mask and support of report.model; success iff the support is
   // at least kMinNumSamples.
-  static void Finish(const std::vector<X_t>& X, const std::vector<Y_t>& Y, double max_sq_error,
-                     Report* report_out) {
+  static void Finish(const internal::ScorerFor<Estimator>& scorer, int num_points,
+                     double max_sq_error, Report* report_out) {
     Report& report = *report_out;
-    const int num_points = static_cast<int>(X.size());
     std::vector<double> residuals;
-    Estimator::Residuals(X, Y, report.model, &residuals);
+    scorer.Residuals(report.model, &residuals);
     report.inlier_mask.assign(num_points, 0);
     report.support = 0;
     for (int i = 0; i < num_points; ++i) {
@@ -252,7 +375,8 @@ class Ransac {
   // `residuals` holds the model's squared residuals on entry and on exit.
   // Returns the final MSAC cost.
   static double LocallyOptimize(const std::vector<X_t>& X, const std::vector<Y_t>& Y,
-                                double max_sq_error, M_t* model, std::vector<double>* residuals) {
+                                const internal::ScorerFor<Estimator>& scorer, double max_sq_error,
+                                M_t* model, std::vector<double>* residuals) {
     double cost = TruncatedCost(*residuals, max_sq_error);
     std::vector<X_t> inlier_x;
     std::vector<Y_t> inlier_y;
@@ -271,7 +395,7 @@ class Ransac {
       models.clear();
       Estimator::Estimate(inlier_x, inlier_y, &models);
       for (const M_t& refit : models) {
-        Estimator::Residuals(X, Y, refit, &refit_residuals);
+        scorer.Residuals(refit, &refit_residuals);
         const double refit_cost = TruncatedCost(refit_residuals, max_sq_error);
         if (!(refit_cost < cost)) continue;
         *same_inliers = SameInliers(*residuals, refit_residuals, max_sq_error);
@@ -299,10 +423,17 @@ class Ransac {
   }
 
   // MSAC cost: sum over all points of min(r^2, max_error^2).
+  // Four partial sums: one chain of additions is bound by their latency, and
+  // this runs once per hypothesis over all points.
   static double TruncatedCost(const std::vector<double>& sq_residuals, double max_sq_error) {
-    double cost = 0.0;
-    for (double r : sq_residuals) cost += std::min(r, max_sq_error);
-    return cost;
+    double cost[4] = {0.0, 0.0, 0.0, 0.0};
+    const size_t n = sq_residuals.size();
+    size_t i = 0;
+    for (; i + 4 <= n; i += 4) {
+      for (int k = 0; k < 4; ++k) cost[k] += std::min(sq_residuals[i + k], max_sq_error);
+    }
+    for (; i < n; ++i) cost[0] += std::min(sq_residuals[i], max_sq_error);
+    return (cost[0] + cost[1]) + (cost[2] + cost[3]);
   }
 
   static bool SameInliers(const std::vector<double>& a, const std::vector<double>& b,

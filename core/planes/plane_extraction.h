@@ -117,6 +117,13 @@ struct PlaneExtractionOptions {
   // next building): the track is lost and its points return to discovery, so
   // the filter never sees one plane jump to another's depth.
   double max_track_change = 0.25;
+  // Discovery samples locally (Ransac<>::Estimate's neighbours, NAPSAC-like):
+  // a uniformly drawn point and two more from the points whose later-anchor
+  // MB cells are within this many cells (column and row) of its cell. A plane's
+  // points are spatially clustered, so such samples are all-inlier far more
+  // often than uniform ones and the adaptive trial count drops by an order of
+  // magnitude. 0: uniform sampling (the paper's).
+  int local_sampling_radius_mbs = 3;
 };
 
 // The relative motion of an anchor pair, when the epipolar geometry was
