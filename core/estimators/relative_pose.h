@@ -45,7 +45,7 @@ struct RelativePoseRefineOptions {
   // Re-selection stages at max_error after the three widening ones.
   int max_final_stages = 5;
   // Levenberg-Marquardt steps per stage.
-  int steps_per_stage = 2;
+  int steps_per_stage = 1;
 };
 
 struct RelativePoseRefineReport {
