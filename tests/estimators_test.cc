@@ -474,6 +474,27 @@ TEST(RansacLocalSamplingTest, FindsACompactPlaneWithFewerTrials) {
   EXPECT_FALSE(ransac.Estimate(x, y, nullptr, &neighbours).success);
 }
 
+// The pre-test skips full scoring of poor hypotheses; the result is as good.
+TEST(RansacPretestTest, SameQualityAsFullScoring) {
+  const NoisyProblem p = MakeNoisyProblem(/*seed=*/23, 400, 0.6);
+  RansacOptions options;
+  options.max_error = 2.0;
+  options.seed = 5;
+  const auto full = Ransac<HomographyEstimator>(options).Estimate(p.x, p.y);
+  options.pretest_points = 100;
+  const auto pretested = Ransac<HomographyEstimator>(options).Estimate(p.x, p.y);
+  ASSERT_TRUE(full.success && pretested.success);
+  EXPECT_GE(pretested.support, full.support - 3);
+  EXPECT_LT(MaxTransferDifferencePx(pretested.model, TrueHomography()), 0.75);
+  const auto again = Ransac<HomographyEstimator>(options).Estimate(p.x, p.y);
+  EXPECT_EQ(again.inlier_mask, pretested.inlier_mask);
+  // Too few points for the test set: off, the same as full scoring.
+  options.pretest_points = 201;
+  const auto off = Ransac<HomographyEstimator>(options).Estimate(p.x, p.y);
+  EXPECT_EQ(off.inlier_mask, full.inlier_mask);
+  EXPECT_EQ(off.num_trials, full.num_trials);
+}
+
 TEST(RansacTest, RejectsBrokenInput) {
   const TwoPlanes t = MakeTwoPlanes();
   RansacOptions options;  // max_error = 0: invalid

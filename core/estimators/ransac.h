@@ -53,6 +53,15 @@
 //    b_i (a_i) the number of i's pool neighbours (that are inliers), or of
 //    the other pool points (inliers) for an isolated i, and
 //    N = log(1 - confidence) / log(1 - p), clamped as above.
+//  - Pre-test (pretest_points > 0; the bail-out of Capel, BMVC 2005): most
+//    hypotheses are poor, and scoring them on all points is the main cost.
+//    A fixed random set of pretest_points points is drawn once per call (by
+//    its own generator, so the samples are the same as without it); a
+//    hypothesis goes on to full scoring only if its inliers in that set are
+//    at least pretest_min_ratio x those of the best model so far (once that
+//    has pretest_min_best_inliers of them). A hypothesis as good as the best
+//    one fails this with small probability (binomial tails), and then only
+//    that one hypothesis is lost; the trial count is unchanged.
 //  - Deterministic: a fresh std::mt19937_64 seeded with `seed` per call, and an
 //    own unbiased index helper (std::uniform_int_distribution's output is
 //    implementation-defined, so results would differ between standard libraries).
@@ -83,6 +92,15 @@ struct RansacOptions {
   uint64_t seed = 0;
   // Refit on all inliers after the random search (see file comment).
   bool local_optimization = true;
+  // Pre-test of hypotheses (see file comment): the size of the fixed random
+  // test set; 0 (or fewer than 2x this many points) turns it off.
+  int pretest_points = 0;
+  // A hypothesis is scored on all points only if it has at least this
+  // fraction of the best model's inliers on the test set.
+  double pretest_min_ratio = 0.5;
+  // ... and only once the best model has at least this many of them (fewer
+  // say too little to reject anything).
+  int pretest_min_best_inliers = 8;
 };
 
 template <typename Model>
@@ -216,6 +234,27 @@ class Ransac {
     std::vector<M_t> models;
     std::vector<double> residuals;
 
+    // Pre-test set: distinct random points, by a generator of its own.
+    std::vector<int> test_index;
+    std::vector<X_t> test_x;
+    std::vector<Y_t> test_y;
+    std::vector<double> test_residuals;
+    const bool pretest = options_.pretest_points > 0 && num_points >= 2 * options_.pretest_points;
+    if (pretest) {
+      std::mt19937_64 test_rng(options_.seed ^ 0x5DEECE66Dull);
+      std::vector<int> all(num_points);
+      for (int i = 0; i < num_points; ++i) all[i] = i;
+      for (int s = 0; s < options_.pretest_points; ++s) {
+        const int j = s + static_cast<int>(internal::UniformIndex(test_rng, num_points - s));
+        std::swap(all[s], all[j]);
+        test_index.push_back(all[s]);
+        test_x.push_back(X[all[s]]);
+        test_y.push_back(Y[all[s]]);
+      }
+    }
+    const internal::ScorerFor<Estimator> test_scorer(test_x, test_y);
+    int best_test_inliers = 0;
+
     double best_cost = std::numeric_limits<double>::infinity();
     int best_support = 0;
     int dynamic_max_trials = max_trials;
@@ -261,6 +300,13 @@ class Ransac {
       models.clear();
       Estimator::Estimate(sample_x, sample_y, &models);
       for (const M_t& model : models) {
+        if (pretest && best_test_inliers >= options_.pretest_min_best_inliers) {
+          test_scorer.Residuals(model, &test_residuals);
+          if (CountInliers(test_residuals, max_sq_error) <
+              options_.pretest_min_ratio * best_test_inliers) {
+            continue;
+          }
+        }
         scorer.Residuals(model, &residuals);
         double cost = TruncatedCost(residuals, max_sq_error);
         if (!(cost < best_cost)) continue;
@@ -273,6 +319,8 @@ class Ransac {
         }
         best_cost = cost;
         best_support = CountInliers(residuals, max_sq_error);
+        best_test_inliers = 0;
+        for (int i : test_index) best_test_inliers += residuals[i] <= max_sq_error ? 1 : 0;
         if (neighbours == nullptr) {
           int pool_inliers = 0;
           for (int i : pool) pool_inliers += residuals[i] <= max_sq_error ? 1 : 0;

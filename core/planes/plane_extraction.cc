@@ -296,6 +296,7 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
   ransac_options.confidence = options_.confidence;
   ransac_options.min_num_trials = options_.min_trials_per_plane;
   ransac_options.max_num_trials = options_.max_trials_per_plane;
+  ransac_options.pretest_points = options_.ransac_pretest_points;
   uint64_t ransac_call = 0;
 
   const PairMotion* used_motion = options_.use_motion ? motion : nullptr;

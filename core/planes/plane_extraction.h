@@ -124,6 +124,10 @@ struct PlaneExtractionOptions {
   // often than uniform ones and the adaptive trial count drops by an order of
   // magnitude. 0: uniform sampling (the paper's).
   int local_sampling_radius_mbs = 3;
+  // RANSAC pre-test (RansacOptions::pretest_points, Capel's bail-out): a
+  // hypothesis is scored on all points only if, on a fixed random set of this
+  // many points, it has at least half the best model's inliers. 0: off.
+  int ransac_pretest_points = 100;
 };
 
 // The relative motion of an anchor pair, when the epipolar geometry was
