@@ -103,6 +103,29 @@ TEST(EpipolarPlaneEstimatorTest, PlaneBehindTheCameraHasInfiniteResiduals) {
   for (double x : r) EXPECT_EQ(x, std::numeric_limits<double>::infinity());
 }
 
+// Ransac<>'s vectorised scorer gives exactly Residuals' values, also for
+// points behind the camera (+infinity) and odd counts (a scalar tail).
+TEST(EpipolarPlaneEstimatorTest, ScorerEqualsResiduals) {
+  std::mt19937_64 rng(4);
+  Points later, earlier;
+  MakePlanePoints(RoadM(), 0, 640, 300, 480, 0.7, rng, &later, &earlier);
+  MakePlanePoints(FacadeM(), 400, 640, 0, 300, 0.7, rng, &later, &earlier);
+  if (later.size() % 2 == 0) {  // one more, for an odd count
+    later.push_back({320, 100});
+    earlier.push_back({321, 99});
+  }
+  const std::vector<EpipolarPlanePoint> X = Prepare(later);
+  const EpipolarPlaneEstimator::Scorer scorer(X, earlier);
+  for (const Eigen::Vector3d& m : {RoadM(), FacadeM(), Eigen::Vector3d(RoadM() * 1.1),
+                                   Eigen::Vector3d(-RoadM()), Eigen::Vector3d::Zero().eval()}) {
+    std::vector<double> expected, actual;
+    EpipolarPlaneEstimator::Residuals(X, earlier, m, &expected);
+    scorer.Residuals(m, &actual);
+    ASSERT_EQ(actual.size(), expected.size());
+    for (size_t i = 0; i < expected.size(); ++i) EXPECT_EQ(actual[i], expected[i]) << i;
+  }
+}
+
 TEST(EpipolarPlaneEstimatorTest, LeastSquaresUnderNoiseIsCloseToTheTruth) {
   std::mt19937_64 rng(4);
   Points later, earlier;

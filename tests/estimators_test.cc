@@ -404,6 +404,97 @@ TEST(RansacSampleSubsetTest, EmptyTooSmallOrInvalidSubsetGivesNoModel) {
   EXPECT_TRUE(ransac.Estimate(t.x, t.y, &four).success);
 }
 
+// Polish: no random search; a perturbed model (say, the previous frame's) is
+// refitted onto the inliers, the best of several wins, and a model explaining
+// nothing fails.
+TEST(RansacPolishTest, PolishesTheBestOfGivenModels) {
+  const NoisyProblem p = MakeNoisyProblem(/*seed=*/17, 300, 0.4);
+  RansacOptions options;
+  options.max_error = 2.0;
+  const auto full = Ransac<HomographyEstimator>(options).Estimate(p.x, p.y);
+  ASSERT_TRUE(full.success);
+  Eigen::Matrix3d off = TrueHomography();
+  off(0, 2) += 3.0;  // 3 px sideways
+  const Eigen::Matrix3d far = Eigen::Vector3d(1, 2, 3).asDiagonal();
+  const auto polished = Ransac<HomographyEstimator>(options).Polish(p.x, p.y, {far, off});
+  ASSERT_TRUE(polished.success);
+  EXPECT_EQ(polished.num_trials, 0);
+  EXPECT_GE(polished.support, full.support - 3);
+  EXPECT_LT(MaxTransferDifferencePx(polished.model, TrueHomography()), 0.75);
+  EXPECT_FALSE(Ransac<HomographyEstimator>(options).Polish(p.x, p.y, {far}).success);
+  EXPECT_FALSE(Ransac<HomographyEstimator>(options).Polish(p.x, p.y, {}).success);
+}
+
+// Local sampling: one compact plane (20 % of the points, in the image's left
+// quarter) among garbage. Samples from neighbourhoods are all-inlier far more
+// often, so the adaptive trial count is a fraction of the uniform one.
+TEST(RansacLocalSamplingTest, FindsACompactPlaneWithFewerTrials) {
+  std::mt19937_64 rng(31);
+  std::uniform_real_distribution<double> left_u(0, 160), any_u(160, 640), any_v(0, 480);
+  std::normal_distribution<double> noise(0.0, 0.25);
+  Points x, y;
+  std::vector<char> on_plane;
+  for (int i = 0; i < 300; ++i) {
+    const bool plane = i % 5 == 0;
+    const Eigen::Vector2d p(plane ? left_u(rng) : any_u(rng), any_v(rng));
+    x.push_back(p);
+    y.push_back(plane ? Eigen::Vector2d(Apply(TrueHomography(), p) +
+                                        Eigen::Vector2d(noise(rng), noise(rng)))
+                      : Eigen::Vector2d(any_u(rng), any_v(rng)));
+    on_plane.push_back(plane);
+  }
+  std::vector<std::vector<int>> neighbours(x.size());
+  for (size_t i = 0; i < x.size(); ++i) {
+    for (size_t j = 0; j < x.size(); ++j) {
+      if (j != i && (x[i] - x[j]).norm() < 80.0) neighbours[i].push_back(static_cast<int>(j));
+    }
+  }
+  RansacOptions options;
+  options.max_error = 1.0;
+  options.seed = 3;
+  const Ransac<HomographyEstimator> ransac(options);
+  const auto uniform = ransac.Estimate(x, y);
+  const auto local = ransac.Estimate(x, y, nullptr, &neighbours);
+  ASSERT_TRUE(uniform.success && local.success);
+  int found = 0;
+  for (size_t i = 0; i < x.size(); ++i) {
+    if (!on_plane[i]) continue;
+    found += local.inlier_mask[i];
+    // Where the plane is seen (a free homography extrapolates poorly beyond).
+    EXPECT_LT((Apply(local.model, x[i]) - Apply(TrueHomography(), x[i])).norm(), 0.5);
+  }
+  EXPECT_GE(found, 55);
+  EXPECT_LT(local.num_trials, uniform.num_trials / 4);
+  // Deterministic.
+  const auto again = ransac.Estimate(x, y, nullptr, &neighbours);
+  EXPECT_EQ(again.inlier_mask, local.inlier_mask);
+  EXPECT_EQ(again.num_trials, local.num_trials);
+  // One list per point, or no model.
+  neighbours.pop_back();
+  EXPECT_FALSE(ransac.Estimate(x, y, nullptr, &neighbours).success);
+}
+
+// The pre-test skips full scoring of poor hypotheses; the result is as good.
+TEST(RansacPretestTest, SameQualityAsFullScoring) {
+  const NoisyProblem p = MakeNoisyProblem(/*seed=*/23, 400, 0.6);
+  RansacOptions options;
+  options.max_error = 2.0;
+  options.seed = 5;
+  const auto full = Ransac<HomographyEstimator>(options).Estimate(p.x, p.y);
+  options.pretest_points = 100;
+  const auto pretested = Ransac<HomographyEstimator>(options).Estimate(p.x, p.y);
+  ASSERT_TRUE(full.success && pretested.success);
+  EXPECT_GE(pretested.support, full.support - 3);
+  EXPECT_LT(MaxTransferDifferencePx(pretested.model, TrueHomography()), 0.75);
+  const auto again = Ransac<HomographyEstimator>(options).Estimate(p.x, p.y);
+  EXPECT_EQ(again.inlier_mask, pretested.inlier_mask);
+  // Too few points for the test set: off, the same as full scoring.
+  options.pretest_points = 201;
+  const auto off = Ransac<HomographyEstimator>(options).Estimate(p.x, p.y);
+  EXPECT_EQ(off.inlier_mask, full.inlier_mask);
+  EXPECT_EQ(off.num_trials, full.num_trials);
+}
+
 TEST(RansacTest, RejectsBrokenInput) {
   const TwoPlanes t = MakeTwoPlanes();
   RansacOptions options;  // max_error = 0: invalid

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <functional>
+#include <iterator>
 #include <map>
 #include <random>
 #include <vector>
@@ -329,6 +330,131 @@ TEST(ThresholdInfinityTest, BrokenContractIsInvalidArgument) {
   options.tau_inf_px = 0.0;
   result = ThresholdInfinity(s.pair.correspondences, TestIntrinsics(), options);
   EXPECT_EQ(result.status().code(), StatusCode::kInvalidArgument);
+}
+
+// The seeded fast path: from the previous pair's motion (here the truth of a
+// similar step, a degree and a few degrees of heading off) it recovers the
+// motion at least as well as the full fit and keeps the same correspondences.
+TEST(ThresholdInfinityTest, SeededFastPathRecoversMotion) {
+  SceneNoise noise;
+  noise.seed = 6;
+  const SyntheticPair s = MakePair(Frame0(), Frame1(), 0, noise);
+  const auto full = ThresholdInfinity(s.pair.correspondences, TestIntrinsics(), {});
+  ASSERT_TRUE(full.ok());
+  ASSERT_TRUE(full->has_motion);
+  EXPECT_FALSE(full->motion_from_prior);
+  EXPECT_GT(full->num_sampson_inliers, 0.7 * s.label.size());
+
+  InfinityPrior prior;
+  prior.later_from_earlier =
+      Rigid3d(s.later_from_earlier.R() *
+                  Eigen::AngleAxisd(1.0 * kDegToRad, Eigen::Vector3d(1, 2, -1).normalized())
+                      .toRotationMatrix(),
+              s.later_from_earlier.translation + Eigen::Vector3d(0.05, 0.03, 0.0));
+  prior.reference_inlier_ratio = static_cast<double>(full->num_sampson_inliers) / s.label.size();
+  const auto seeded = ThresholdInfinity(s.pair.correspondences, TestIntrinsics(), {}, &prior);
+  ASSERT_TRUE(seeded.ok());
+  ASSERT_TRUE(seeded->has_motion);
+  EXPECT_TRUE(seeded->motion_from_prior);
+  EXPECT_EQ(seeded->rotation_source, InfinityRotationSource::kEssential);
+  EXPECT_LT(RotationAngleDeg(seeded->later_from_earlier.R(), s.later_from_earlier.R()), 0.05);
+  EXPECT_GT(
+      seeded->later_from_earlier.translation.dot(s.later_from_earlier.translation.normalized()),
+      std::cos(1.0 * kDegToRad));
+  EXPECT_GE(seeded->num_sampson_inliers, 0.98 * full->num_sampson_inliers);
+  EXPECT_EQ(seeded->num_e_inliers, seeded->num_sampson_inliers);
+  // The kept sets differ at most by a few borderline points.
+  std::vector<int> diff;
+  std::set_symmetric_difference(full->kept_indices.begin(), full->kept_indices.end(),
+                                seeded->kept_indices.begin(), seeded->kept_indices.end(),
+                                std::back_inserter(diff));
+  EXPECT_LE(diff.size(), 0.02 * full->kept_indices.size());
+
+  // Off: the full path, the same result as without a prior.
+  InfinityOptions off;
+  off.use_prior = false;
+  const auto unseeded = ThresholdInfinity(s.pair.correspondences, TestIntrinsics(), off, &prior);
+  ASSERT_TRUE(unseeded.ok());
+  EXPECT_FALSE(unseeded->motion_from_prior);
+  EXPECT_EQ(unseeded->kept_indices, full->kept_indices);
+}
+
+// A prior that does not explain the data (a wrong guess, a reference share the
+// refinement cannot reach) or a pair without translation: the full path
+// decides, exactly as without a prior.
+TEST(ThresholdInfinityTest, SeededFastPathFallsBack) {
+  SceneNoise noise;
+  noise.seed = 7;
+  const SyntheticPair fwd = MakePair(Frame0(), Frame1(), 0, noise);
+  const auto full = ThresholdInfinity(fwd.pair.correspondences, TestIntrinsics(), {});
+  ASSERT_TRUE(full.ok() && full->has_motion);
+  const double ratio = static_cast<double>(full->num_sampson_inliers) / fwd.label.size();
+
+  InfinityPrior wrong;  // sideways, turned by 30 deg
+  wrong.later_from_earlier =
+      Rigid3d(Eigen::AngleAxisd(30 * kDegToRad, Eigen::Vector3d::UnitY()).toRotationMatrix(),
+              Eigen::Vector3d(1, 0, 0));
+  wrong.reference_inlier_ratio = ratio;
+  InfinityPrior unreachable;  // the right motion, but an inlier share no fit reaches
+  unreachable.later_from_earlier = fwd.later_from_earlier;
+  unreachable.reference_inlier_ratio = 1.2 * ratio;
+  for (const InfinityPrior* prior : {&wrong, &unreachable}) {
+    const auto result = ThresholdInfinity(fwd.pair.correspondences, TestIntrinsics(), {}, prior);
+    ASSERT_TRUE(result.ok());
+    EXPECT_FALSE(result->motion_from_prior);
+    EXPECT_TRUE(result->has_motion);
+    EXPECT_EQ(result->kept_indices, full->kept_indices);
+    EXPECT_EQ(result->later_from_earlier.translation, full->later_from_earlier.translation);
+  }
+
+  // A pure rotation after a forward pair: the fast path never says "no
+  // motion", the full path does.
+  const SyntheticPair rot = MakePair(Frame0(), CamFromWorld({0, 0, 0}, 2.0, 0.7), 0, noise);
+  InfinityPrior previous;
+  previous.later_from_earlier = fwd.later_from_earlier;
+  previous.reference_inlier_ratio = ratio;
+  const auto result = ThresholdInfinity(rot.pair.correspondences, TestIntrinsics(), {}, &previous);
+  ASSERT_TRUE(result.ok());
+  EXPECT_FALSE(result->has_motion);
+  EXPECT_FALSE(result->motion_from_prior);
+  EXPECT_EQ(result->rotation_source, InfinityRotationSource::kRotationOnly);
+  EXPECT_LT(RotationAngleDeg(result->later_from_earlier.R(), rot.later_from_earlier.R()), 0.05);
+}
+
+// The tracker hands a pair's motion to the next consecutive pair only.
+TEST(InfinityPriorTrackerTest, PriorOnlyForConsecutivePairsWithMotion) {
+  SceneNoise noise;
+  noise.seed = 8;
+  const SyntheticPair first = MakePair(Frame0(), Frame1(), 0, noise);
+  InfinityPriorTracker tracker;
+  EXPECT_EQ(tracker.PriorFor(first.pair), nullptr);
+  const auto full = ThresholdInfinity(first.pair.correspondences, TestIntrinsics(), {});
+  ASSERT_TRUE(full.ok() && full->has_motion);
+  tracker.Record(first.pair, &*full);
+
+  const SyntheticPair second = MakePair(Frame1(), Frame2(), 1, noise);
+  const InfinityPrior* prior = tracker.PriorFor(second.pair);
+  ASSERT_NE(prior, nullptr);
+  EXPECT_EQ(prior->later_from_earlier.translation, full->later_from_earlier.translation);
+  const double reference = static_cast<double>(full->num_sampson_inliers) / first.label.size();
+  EXPECT_DOUBLE_EQ(prior->reference_inlier_ratio, reference);
+  const auto seeded = ThresholdInfinity(second.pair.correspondences, TestIntrinsics(), {}, prior);
+  ASSERT_TRUE(seeded.ok() && seeded->has_motion);
+  EXPECT_TRUE(seeded->motion_from_prior);
+  EXPECT_LT(RotationAngleDeg(seeded->later_from_earlier.R(), second.later_from_earlier.R()), 0.05);
+  tracker.Record(second.pair, &*seeded);
+  // The reference stays the last full fit's.
+  SyntheticPair third = MakePair(Frame1(), Frame2(), 2, noise);
+  ASSERT_NE(tracker.PriorFor(third.pair), nullptr);
+  EXPECT_DOUBLE_EQ(tracker.PriorFor(third.pair)->reference_inlier_ratio, reference);
+  EXPECT_EQ(tracker.PriorFor(third.pair)->later_from_earlier.translation,
+            seeded->later_from_earlier.translation);
+  // Not consecutive, or after a pair without motion (or a failure): no prior.
+  third.pair.earlier_index = 5;
+  EXPECT_EQ(tracker.PriorFor(third.pair), nullptr);
+  third.pair.earlier_index = 2;
+  tracker.Record(second.pair, nullptr);
+  EXPECT_EQ(tracker.PriorFor(third.pair), nullptr);
 }
 
 // Runs thresholding and extraction on one pair; with_motion: planes

@@ -1,5 +1,6 @@
 #include "core/estimators/epipolar_plane.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -95,6 +96,59 @@ void EpipolarPlaneEstimator::Residuals(const std::vector<X_t>& X, const std::vec
       continue;
     }
     (*squared_residuals)[i] = (Y[i] - p.head<2>() / p.z()).squaredNorm();
+  }
+}
+
+EpipolarPlaneEstimator::Scorer::Scorer(const std::vector<X_t>& X, const std::vector<Y_t>& Y) {
+  const size_t n = std::min(X.size(), Y.size());
+  for (std::vector<double>* a :
+       {&rx_, &ry_, &rz_, &ax_, &ay_, &az_, &bx_, &by_, &bz_, &yx_, &yy_}) {
+    a->resize(n);
+  }
+  for (size_t i = 0; i < n; ++i) {
+    rx_[i] = X[i].ray_later.x();
+    ry_[i] = X[i].ray_later.y();
+    rz_[i] = X[i].ray_later.z();
+    ax_[i] = X[i].a.x();
+    ay_[i] = X[i].a.y();
+    az_[i] = X[i].a.z();
+    bx_[i] = X[i].b.x();
+    by_[i] = X[i].b.y();
+    bz_[i] = X[i].b.z();
+    yx_[i] = Y[i].x();
+    yy_[i] = Y[i].y();
+  }
+}
+
+void EpipolarPlaneEstimator::Scorer::Residuals(const M_t& m,
+                                               std::vector<double>* squared_residuals) const {
+  const size_t n = rx_.size();
+  squared_residuals->resize(n);
+  double* out = squared_residuals->data();
+  const double mx = m.x(), my = m.y(), mz = m.z();
+  constexpr double kInfinity = std::numeric_limits<double>::infinity();
+  // As Residuals, operation for operation: rho = m . r (Eigen's order of the
+  // sum), p = a + rho b, r^2 = |y - p_xy / p_z|^2; +infinity unless rho > 0
+  // and p_z > 1e-12. Two points at a time in Eigen's fixed-size packets (the
+  // two divisions dominate; SIMD halves them), the validity test per point.
+  using Pair = Eigen::Array2d;
+  auto at = [](const std::vector<double>& v, size_t i) { return Eigen::Map<const Pair>(&v[i]); };
+  size_t i = 0;
+  for (; i + 2 <= n; i += 2) {
+    const Pair rho = mx * at(rx_, i) + (my * at(ry_, i) + mz * at(rz_, i));
+    const Pair pz = at(az_, i) + rho * at(bz_, i);
+    const Pair dx = at(yx_, i) - (at(ax_, i) + rho * at(bx_, i)) / pz;
+    const Pair dy = at(yy_, i) - (at(ay_, i) + rho * at(by_, i)) / pz;
+    const Pair sq = dx * dx + dy * dy;
+    out[i] = rho(0) > 0.0 && pz(0) > 1e-12 ? sq(0) : kInfinity;
+    out[i + 1] = rho(1) > 0.0 && pz(1) > 1e-12 ? sq(1) : kInfinity;
+  }
+  for (; i < n; ++i) {
+    const double rho = mx * rx_[i] + (my * ry_[i] + mz * rz_[i]);
+    const double pz = az_[i] + rho * bz_[i];
+    const double dx = yx_[i] - (ax_[i] + rho * bx_[i]) / pz;
+    const double dy = yy_[i] - (ay_[i] + rho * by_[i]) / pz;
+    out[i] = rho > 0.0 && pz > 1e-12 ? dx * dx + dy * dy : kInfinity;
   }
 }
 

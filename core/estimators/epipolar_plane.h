@@ -71,6 +71,19 @@ class EpipolarPlaneEstimator {
   static void Residuals(const std::vector<X_t>& X, const std::vector<Y_t>& Y, const M_t& m,
                         std::vector<double>* squared_residuals);
 
+  // Ransac<>'s scorer: the points as structure-of-arrays, prepared once per
+  // RANSAC call, so that the residuals of a hypothesis are one branch-free
+  // pass over contiguous arrays. The same arithmetic as Residuals, in the same
+  // order, so the same values.
+  class Scorer {
+   public:
+    Scorer(const std::vector<X_t>& X, const std::vector<Y_t>& Y);
+    void Residuals(const M_t& m, std::vector<double>* squared_residuals) const;
+
+   private:
+    std::vector<double> rx_, ry_, rz_, ax_, ay_, az_, bx_, by_, bz_, yx_, yy_;
+  };
+
   // H = K (R + t m^T) K^-1 scaled to ||H||_F = 1. Its sign is kept: (H x)_z =
   // p_z > 0 for points in front of the earlier camera, as HomographyEstimator's.
   static Eigen::Matrix3d Homography(const M_t& m, const Intrinsics& intrinsics,

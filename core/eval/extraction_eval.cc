@@ -180,6 +180,7 @@ StatusOr<ExtractionStats> EvaluateExtraction(const std::string& drive_dir,
   SegmentMerger merger(gt->intrinsics.width_px, gt->intrinsics.height_px,
                        (*reader)->info().mv_sigma_px(), options.merge);
   PlaneExtractor extractor(options.extraction);
+  InfinityPriorTracker prior_tracker;
   ExtractionStats stats;
   std::optional<AnchorPair> prev_pair;
   std::optional<InfinityResult> prev_inf;
@@ -194,7 +195,10 @@ StatusOr<ExtractionStats> EvaluateExtraction(const std::string& drive_dir,
     if (!pair.has_value()) continue;
     stats.merge_ms += MsSince(t0);
     t0 = std::chrono::steady_clock::now();
-    auto inf = ThresholdInfinity(pair->correspondences, gt->intrinsics, options.infinity);
+    // As the pipeline: the previous pair's motion seeds this pair's.
+    auto inf = ThresholdInfinity(pair->correspondences, gt->intrinsics, options.infinity,
+                                 prior_tracker.PriorFor(*pair));
+    prior_tracker.Record(*pair, inf.ok() ? &*inf : nullptr);
     stats.threshold_ms += MsSince(t0);
     if (!inf.ok()) return inf.status();
     t0 = std::chrono::steady_clock::now();

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <map>
 #include <tuple>
 
 namespace slapse {
@@ -265,21 +264,33 @@ AnchorPair SegmentMerger::Build(const FrameRecord& later) const {
   }
   // Indirect: B blocks with both a past (f) and a future (g) vector.
   if (options_.use_indirect && !b_pyramid_seen_) {
+    std::vector<const MotionVector*> sorted_mvs;
     for (const FrameRecord& b : b_frames_) {
       if (b.next_anchor_index != later.index) continue;
-      // FFmpeg exports a bi-predicted block as two entries with the same block.
-      std::map<std::tuple<float, float, int, int>,
-               std::pair<const MotionVector*, const MotionVector*>>
-          blocks;
-      for (const MotionVector& mv : b.mvs) {
-        auto& slot = blocks[{mv.x_px, mv.y_px, mv.w_px, mv.h_px}];
-        (mv.direction == RefDirection::kPast ? slot.first : slot.second) = &mv;
-      }
-      for (const auto& [key, fg] : blocks) {
-        if (fg.first == nullptr || fg.second == nullptr) continue;
-        const Eigen::Vector2d y(fg.first->x_px, fg.first->y_px);
-        const Eigen::Vector2d start = y + Eigen::Vector2d(fg.second->dx_px, fg.second->dy_px);
-        const Eigen::Vector2d end = y + Eigen::Vector2d(fg.first->dx_px, fg.first->dy_px);
+      // FFmpeg exports a bi-predicted block as two entries with the same block:
+      // sorted stably by block (x, y, w, h), each block's last past (f) and
+      // last future (g) vector pair up, blocks in ascending order. (A sort,
+      // not a map: no allocation per block.)
+      auto block_of = [](const MotionVector* mv) {
+        return std::make_tuple(mv->x_px, mv->y_px, mv->w_px, mv->h_px);
+      };
+      sorted_mvs.clear();
+      for (const MotionVector& mv : b.mvs) sorted_mvs.push_back(&mv);
+      std::stable_sort(
+          sorted_mvs.begin(), sorted_mvs.end(),
+          [&](const MotionVector* x, const MotionVector* y) { return block_of(x) < block_of(y); });
+      for (size_t first = 0, next = 0; first < sorted_mvs.size(); first = next) {
+        const MotionVector* f = nullptr;
+        const MotionVector* g = nullptr;
+        for (next = first;
+             next < sorted_mvs.size() && block_of(sorted_mvs[next]) == block_of(sorted_mvs[first]);
+             ++next) {
+          (sorted_mvs[next]->direction == RefDirection::kPast ? f : g) = sorted_mvs[next];
+        }
+        if (f == nullptr || g == nullptr) continue;
+        const Eigen::Vector2d y(f->x_px, f->y_px);
+        const Eigen::Vector2d start = y + Eigen::Vector2d(g->dx_px, g->dy_px);
+        const Eigen::Vector2d end = y + Eigen::Vector2d(f->dx_px, f->dy_px);
         const int cell = CellOf(start);
         if (cell < 0) continue;
         cells[cell].push_back({start, end, false});

@@ -40,6 +40,7 @@ StatusOr<std::optional<PipelineStep>> Pipeline::Push(const FrameRecord& frame) {
 void Pipeline::Break() {
   merger_.Reset();
   extractor_.Reset();
+  prior_tracker_.Reset();
   ekf_ = PlaneEkf(intrinsics_, options_.ekf);
 }
 
@@ -53,9 +54,11 @@ PipelineStep Pipeline::Process(const AnchorPair& pair) {
   const double dt_s = pair.later_timestamp_s - pair.earlier_timestamp_s;
 
   // Plane at infinity, then planes.
+  // The previous pair's motion seeds this pair's (ThresholdInfinity's fast path).
   auto t0 = std::chrono::steady_clock::now();
-  StatusOr<InfinityResult> inf =
-      ThresholdInfinity(pair.correspondences, intrinsics_, options_.infinity);
+  StatusOr<InfinityResult> inf = ThresholdInfinity(
+      pair.correspondences, intrinsics_, options_.infinity, prior_tracker_.PriorFor(pair));
+  prior_tracker_.Record(pair, inf.ok() ? &*inf : nullptr);
   step.times.threshold_ms = MsSince(t0);
   step.kept = inf.ok() ? static_cast<int>(inf->kept_indices.size()) : 0;
   t0 = std::chrono::steady_clock::now();

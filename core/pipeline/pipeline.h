@@ -130,6 +130,7 @@ class Pipeline {
   SegmentMerger merger_;
   PlaneExtractor extractor_;
   PlaneEkf ekf_;
+  InfinityPriorTracker prior_tracker_;  // ThresholdInfinity's seeded fast path
   int64_t last_index_ = -1;
   double last_anchor_s_ = 0.0;
   Rigid3d world_from_cam_;

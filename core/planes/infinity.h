@@ -43,11 +43,34 @@
 // when even that fit fails or there are fewer than max(min_correspondences, 5)
 // correspondences (then nothing is estimated).
 //
+// Seeded fast path (a prior given and use_prior). The motion of consecutive
+// anchor pairs changes slowly, so the previous pair's motion is a good start:
+// RefineRelativePose (core/estimators/relative_pose.h: Levenberg-Marquardt on
+// the Sampson distance over R and t on the unit sphere, with LO-style inlier
+// re-selection at 3, 2, 1.5, 1 x ransac_threshold_px) refines it, and the
+// rotation-only model is polished (LO, no random search) from the refined R
+// and the prior's R instead of a full RANSAC. The result is accepted only if
+//  - its Sampson-inlier share (|r| f_mean <= ransac_threshold_px) is at least
+//    prior_min_inlier_ratio x the prior's reference_inlier_ratio (the share of
+//    the last full fit, so a refinement stuck in a worse local optimum is
+//    caught), and
+//  - it decides has_motion = true with a margin: (a) and (b) with
+//    prior_decision_margin x min_correspondences, (c) with
+//    prior_decision_margin x min_parallax_inlier_ratio, and cheirality for at
+//    least half the E-inliers.
+// Otherwise everything is recomputed by the full path above (USAC_MAGSAC, the
+// rotation-only RANSAC): the fast path never decides "no motion", so the
+// degenerate cases keep the full logic. With the fast path, e_inlier_mask holds
+// the Sampson inliers of the refined motion and num_cheirality_inliers comes
+// from CountCheirality (recoverPose's test, own triangulation).
+//
 // Correspondences that are no E-inliers (wrong MVs) are thresholded like all
 // others, as in the paper: they usually have large parallax, are kept, and are
 // rejected later by the homography RANSAC. e_inlier_mask lets callers drop them.
 #pragma once
 
+#include <cstdint>
+#include <optional>
 #include <vector>
 
 #include "core/common/camera.h"
@@ -72,6 +95,23 @@ struct InfinityOptions {
   int min_correspondences = 15;      // fewer: no motion estimate (has_motion = false)
   // Translation needs this share of the rotation-only outliers to be E-inliers.
   double min_parallax_inlier_ratio = 0.25;
+  // Seeded fast path (file comment): used when a prior is passed and this is set.
+  bool use_prior = true;
+  // The refined motion's Sampson-inlier share must reach this fraction of the
+  // prior's reference_inlier_ratio (the last full fit's share).
+  double prior_min_inlier_ratio = 0.9;
+  // The fast path's has_motion tests must pass by this factor (>= 1).
+  double prior_decision_margin = 1.5;
+};
+
+// A guess of the pair's motion for the seeded fast path.
+struct InfinityPrior {
+  // X_later = R X_earlier + t, |t| > 0 (up to scale): e.g. the previous anchor
+  // pair's later_from_earlier.
+  Rigid3d later_from_earlier;
+  // Share of the correspondences that were Sampson inliers of the last full
+  // (USAC_MAGSAC) fit: its num_sampson_inliers / correspondences.
+  double reference_inlier_ratio = 0.0;
 };
 
 enum class InfinityRotationSource {
@@ -87,9 +127,13 @@ struct InfinityResult {
   Rigid3d later_from_earlier;
   std::vector<char> e_inlier_mask;  // per correspondence; all 0 when E was not estimated
   int num_e_inliers = 0;
-  int num_cheirality_inliers = 0;    // points recoverPose triangulated in front of both cameras
-  int num_rotation_outliers = 0;     // points off the rotation-only model by >= max(tau, threshold)
-  int num_parallax_inliers = 0;      // ... of which E-inliers
+  int num_cheirality_inliers = 0;  // points recoverPose triangulated in front of both cameras
+  int num_rotation_outliers = 0;   // points off the rotation-only model by >= max(tau, threshold)
+  int num_parallax_inliers = 0;    // ... of which E-inliers
+  // has_motion only: correspondences whose Sampson distance under
+  // later_from_earlier is <= ransac_threshold_px (in px via the mean focal length).
+  int num_sampson_inliers = 0;
+  bool motion_from_prior = false;    // the seeded fast path was accepted
   std::vector<double> parallax_px;   // per correspondence, w.r.t. later_from_earlier's R
   std::vector<int> kept_indices;     // parallax_px >= tau_inf_px (ascending)
   std::vector<int> dropped_indices;  // parallax_px < tau_inf_px: plane at infinity (ascending)
@@ -98,8 +142,29 @@ struct InfinityResult {
 // InvalidArgument: intrinsics without positive finite focal lengths or a finite
 // principal point, non-finite correspondence coordinates, or non-positive
 // thresholds. Internal: OpenCV threw (not expected for finite input).
+// prior: a guess of the motion for the seeded fast path (null: full path only).
 StatusOr<InfinityResult> ThresholdInfinity(const std::vector<Correspondence>& correspondences,
                                            const Intrinsics& intrinsics,
-                                           const InfinityOptions& options);
+                                           const InfinityOptions& options,
+                                           const InfinityPrior* prior = nullptr);
+
+// Carries the motion from one anchor pair to the next for the seeded fast
+// path: the prior for a pair is the previous pair's motion when that pair had
+// one and ended where this one starts; its reference_inlier_ratio is the last
+// full fit's Sampson-inlier share (kept through a run of seeded fits, so they
+// cannot drift it down).
+class InfinityPriorTracker {
+ public:
+  // Null when there is no usable prior for `pair`.
+  const InfinityPrior* PriorFor(const AnchorPair& pair) const;
+  // Records the pair's result (null: ThresholdInfinity failed), whose
+  // PriorFor(pair) must have been the prior it ran with.
+  void Record(const AnchorPair& pair, const InfinityResult* result);
+  void Reset();
+
+ private:
+  std::optional<InfinityPrior> prior_;
+  int64_t later_index_ = -1;  // the later anchor of the pair prior_ came from
+};
 
 }  // namespace slapse

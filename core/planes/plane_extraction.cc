@@ -25,6 +25,31 @@ uint64_t MixSeed(uint64_t seed, uint64_t call) {
   return z ^ (z >> 31);
 }
 
+// For each point j (in MB cell mb_of[j] of a mb_cols x mb_rows grid), the other
+// points whose cells differ from its by at most `radius` in column and row.
+void MbNeighbours(const std::vector<int>& mb_of, int mb_cols, int mb_rows, int radius,
+                  std::vector<std::vector<int>>* neighbours) {
+  // Points per cell, as a counting sort: cell c's are in_cell[begin[c] .. begin[c + 1]).
+  std::vector<int> begin(mb_cols * mb_rows + 1, 0), in_cell(mb_of.size());
+  for (int cell : mb_of) ++begin[cell + 1];
+  for (size_t c = 1; c < begin.size(); ++c) begin[c] += begin[c - 1];
+  std::vector<int> fill(begin.begin(), begin.end() - 1);
+  for (size_t j = 0; j < mb_of.size(); ++j) in_cell[fill[mb_of[j]]++] = static_cast<int>(j);
+  neighbours->resize(mb_of.size());
+  for (size_t j = 0; j < mb_of.size(); ++j) {
+    std::vector<int>& nb = (*neighbours)[j];
+    nb.clear();
+    const int c0 = mb_of[j] % mb_cols, r0 = mb_of[j] / mb_cols;
+    const int c_lo = std::max(0, c0 - radius), c_hi = std::min(mb_cols - 1, c0 + radius);
+    for (int r = std::max(0, r0 - radius); r <= std::min(mb_rows - 1, r0 + radius); ++r) {
+      // Cells (r, c_lo .. c_hi) are consecutive, so are their points in in_cell.
+      nb.insert(nb.end(), in_cell.begin() + begin[r * mb_cols + c_lo],
+                in_cell.begin() + begin[r * mb_cols + c_hi + 1]);
+    }
+    nb.erase(std::remove(nb.begin(), nb.end(), static_cast<int>(j)), nb.end());
+  }
+}
+
 // Row-major index of the MB cell containing pixel position p, or -1 outside the
 // grid. Pixel centres are on integers, so cell c spans [16c - 0.5, 16c + 15.5).
 int MbCellOf(const Eigen::Vector2d& p, int mb_cols, int mb_rows) {
@@ -167,8 +192,10 @@ class PlaneFitter {
   virtual ~PlaneFitter() = default;
   virtual void SetPoints(const std::vector<Eigen::Vector2d>& x_later,
                          const std::vector<Eigen::Vector2d>& x_earlier) = 0;
-  virtual RansacReport<PlaneModel> Ransac(const RansacOptions& options,
-                                          const std::vector<int>* subset) const = 0;
+  // neighbours: null, or per point for local sampling (Ransac<>::Estimate).
+  virtual RansacReport<PlaneModel> Ransac(
+      const RansacOptions& options, const std::vector<int>* subset,
+      const std::vector<std::vector<int>>* neighbours = nullptr) const = 0;
   // Least-squares fit to the points of `mask`, with the squared residuals of
   // all points; false when the points are degenerate.
   virtual bool FitMasked(const std::vector<char>& mask, PlaneModel* model,
@@ -191,9 +218,11 @@ class EstimatorPlaneFitter : public PlaneFitter {
     X_ = prepare_(x_later);
     Y_ = x_earlier;
   }
-  RansacReport<PlaneModel> Ransac(const RansacOptions& options,
-                                  const std::vector<int>* subset) const override {
-    const RansacReport<M_t> report = slapse::Ransac<Estimator>(options).Estimate(X_, Y_, subset);
+  RansacReport<PlaneModel> Ransac(
+      const RansacOptions& options, const std::vector<int>* subset,
+      const std::vector<std::vector<int>>* neighbours = nullptr) const override {
+    const RansacReport<M_t> report =
+        slapse::Ransac<Estimator>(options).Estimate(X_, Y_, subset, neighbours);
     RansacReport<PlaneModel> out;
     out.success = report.success;
     out.num_trials = report.num_trials;
@@ -306,13 +335,16 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
   ransac_options.confidence = options_.confidence;
   ransac_options.min_num_trials = options_.min_trials_per_plane;
   ransac_options.max_num_trials = options_.max_trials_per_plane;
+  ransac_options.pretest_points = options_.ransac_pretest_points;
   uint64_t ransac_call = 0;
 
   const PairMotion* used_motion = options_.use_motion ? motion : nullptr;
   const std::unique_ptr<PlaneFitter> fitter = MakeFitter(used_motion);
   std::vector<Eigen::Vector2d> x_later, x_earlier;  // of `remaining`
   std::vector<int> mb_of;                           // of `remaining`
-  // Runs RANSAC over `remaining` (local indices in `subset`).
+  std::vector<std::vector<int>> neighbours;         // of `remaining`, for local sampling
+  // Runs RANSAC over `remaining` (local indices in `subset`); discovery
+  // (no subset) samples locally when local_sampling_radius_mbs > 0.
   auto run_ransac = [&](const std::vector<int>* subset) {
     x_later.resize(remaining.size());
     x_earlier.resize(remaining.size());
@@ -324,7 +356,12 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
     }
     fitter->SetPoints(x_later, x_earlier);
     ransac_options.seed = MixSeed(options_.seed, ransac_call++);
-    return fitter->Ransac(ransac_options, subset);
+    const bool local = subset == nullptr && options_.local_sampling_radius_mbs > 0;
+    if (local) {
+      MbNeighbours(mb_of, pair.mb_cols, pair.mb_rows, options_.local_sampling_radius_mbs,
+                   &neighbours);
+    }
+    return fitter->Ransac(ransac_options, subset, local ? &neighbours : nullptr);
   };
   // A plane hypothesis over `remaining`: its model and inlier mask.
   struct Consensus {

@@ -149,6 +149,17 @@ struct PlaneExtractionOptions {
   // Boundary trim: cells without any MV do not make a block a border block
   // (only cells whose MVs belong elsewhere do).
   bool boundary_ignore_empty = false;
+  // Discovery samples locally (Ransac<>::Estimate's neighbours, NAPSAC-like):
+  // a uniformly drawn point and two more from the points whose later-anchor
+  // MB cells are within this many cells (column and row) of its cell. A plane's
+  // points are spatially clustered, so such samples are all-inlier far more
+  // often than uniform ones and the adaptive trial count drops by an order of
+  // magnitude. 0: uniform sampling (the paper's).
+  int local_sampling_radius_mbs = 3;
+  // RANSAC pre-test (RansacOptions::pretest_points, Capel's bail-out): a
+  // hypothesis is scored on all points only if, on a fixed random set of this
+  // many points, it has at least half the best model's inliers. 0: off.
+  int ransac_pretest_points = 100;
 };
 
 // The relative motion of an anchor pair, when the epipolar geometry was

@@ -1,0 +1,202 @@
+#include "core/estimators/relative_pose.h"
+
+#include <cmath>
+#include <limits>
+
+#include <Eigen/Cholesky>
+
+#include "core/common/so3.h"
+
+namespace slapse {
+namespace {
+
+// Squared residuals over the points of `mask` under (R, t); their sum.
+double MaskedCost(const std::vector<Eigen::Vector3d>& rays_earlier,
+                  const std::vector<Eigen::Vector3d>& rays_later, const Eigen::Matrix3d& E,
+                  const std::vector<char>& mask) {
+  double cost = 0.0;
+  for (size_t i = 0; i < mask.size(); ++i) {
+    if (!mask[i]) continue;
+    const double r = SampsonDistance(E, rays_earlier[i], rays_later[i]);
+    cost += r * r;
+  }
+  return cost;
+}
+
+}  // namespace
+
+double SampsonDistance(const Eigen::Matrix3d& E, const Eigen::Vector3d& ray_earlier,
+                       const Eigen::Vector3d& ray_later, Eigen::Matrix<double, 1, 9>* d_r_d_E) {
+  // a = E x_e, b = E^T x_l, e = x_l^T a, D = a_0^2 + a_1^2 + b_0^2 + b_1^2.
+  const Eigen::Vector3d a = E * ray_earlier;
+  const Eigen::Vector3d b = E.transpose() * ray_later;
+  const double e = ray_later.dot(a);
+  const double D = a(0) * a(0) + a(1) * a(1) + b(0) * b(0) + b(1) * b(1);
+  if (!(D > 1e-300)) {
+    if (d_r_d_E != nullptr) d_r_d_E->setZero();
+    return std::numeric_limits<double>::infinity();
+  }
+  const double inv_sqrt_D = 1.0 / std::sqrt(D);
+  const double r = e * inv_sqrt_D;
+  if (d_r_d_E != nullptr) {
+    // de/dE_ij = x_l,i x_e,j;  dD/dE_ij = 2 a_i x_e,j [i < 2] + 2 b_j x_l,i [j < 2];
+    // dr = de / sqrt(D) - e dD / (2 D^(3/2)) = (de - r dD / (2 sqrt(D))) / sqrt(D).
+    const double half_r_over_sqrt_D = r * inv_sqrt_D;  // r / sqrt(D); dD carries the 2
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) {
+        double dD_half = 0.0;
+        if (i < 2) dD_half += a(i) * ray_earlier(j);
+        if (j < 2) dD_half += b(j) * ray_later(i);
+        (*d_r_d_E)(3 * i + j) =
+            (ray_later(i) * ray_earlier(j) - half_r_over_sqrt_D * dD_half) * inv_sqrt_D;
+      }
+    }
+  }
+  return r;
+}
+
+Eigen::Matrix<double, 9, 5> EssentialJacobian(const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
+                                              const Eigen::Matrix<double, 3, 2>& basis) {
+  Eigen::Matrix<double, 9, 5> J;
+  const Eigen::Matrix3d t_x_R = Skew(t) * R;
+  for (int k = 0; k < 5; ++k) {
+    const Eigen::Matrix3d dE = k < 3 ? Eigen::Matrix3d(t_x_R * Skew(Eigen::Vector3d::Unit(k)))
+                                     : Eigen::Matrix3d(Skew(basis.col(k - 3)) * R);
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) J(3 * i + j, k) = dE(i, j);
+    }
+  }
+  return J;
+}
+
+Eigen::Matrix<double, 3, 2> TangentBasis(const Eigen::Vector3d& t) {
+  // The axis least aligned with t gives a well-conditioned cross product.
+  Eigen::Vector3d::Index axis;
+  t.cwiseAbs().minCoeff(&axis);
+  const Eigen::Vector3d b0 = t.cross(Eigen::Vector3d::Unit(axis)).normalized();
+  Eigen::Matrix<double, 3, 2> basis;
+  basis.col(0) = b0;
+  basis.col(1) = t.cross(b0).normalized();
+  return basis;
+}
+
+RelativePoseRefineReport RefineRelativePose(const std::vector<Eigen::Vector3d>& rays_earlier,
+                                            const std::vector<Eigen::Vector3d>& rays_later,
+                                            const Rigid3d& initial_later_from_earlier,
+                                            const RelativePoseRefineOptions& options) {
+  RelativePoseRefineReport report;
+  report.later_from_earlier = initial_later_from_earlier;
+  const size_t n = rays_earlier.size();
+  if (n != rays_later.size() || !(options.max_error > 0.0) ||
+      !(initial_later_from_earlier.translation.norm() > 0.0)) {
+    return report;
+  }
+  Eigen::Matrix3d R = initial_later_from_earlier.R();
+  Eigen::Vector3d t = initial_later_from_earlier.translation.normalized();
+  constexpr int kMinInliers = 5;
+  constexpr double kWideningMultipliers[] = {3.0, 2.0, 1.5};
+  const int num_stages = 3 + std::max(1, options.max_final_stages);
+
+  std::vector<char> selected(n, 0), previous(n, 0);
+  for (int stage = 0; stage < num_stages; ++stage) {
+    const double threshold = options.max_error * (stage < 3 ? kWideningMultipliers[stage] : 1.0);
+    const Eigen::Matrix3d E = Skew(t) * R;
+    int count = 0;
+    for (size_t i = 0; i < n; ++i) {
+      selected[i] = std::abs(SampsonDistance(E, rays_earlier[i], rays_later[i])) <= threshold;
+      count += selected[i];
+    }
+    if (count < kMinInliers) return report;
+    // At max_error, a stable inlier set ends the refinement.
+    if (stage > 3 && selected == previous) break;
+    previous = selected;
+
+    double lambda = 1e-4;
+    for (int step = 0; step < options.steps_per_stage; ++step) {
+      // Gauss-Newton system over the selected points.
+      const Eigen::Matrix<double, 3, 2> basis = TangentBasis(t);
+      const Eigen::Matrix<double, 9, 5> dE_dp = EssentialJacobian(R, t, basis);
+      const Eigen::Matrix3d E_now = Skew(t) * R;
+      Eigen::Matrix<double, 5, 5> H = Eigen::Matrix<double, 5, 5>::Zero();
+      Eigen::Matrix<double, 5, 1> g = Eigen::Matrix<double, 5, 1>::Zero();
+      double cost = 0.0;
+      Eigen::Matrix<double, 1, 9> d_r_d_E;
+      for (size_t i = 0; i < n; ++i) {
+        if (!selected[i]) continue;
+        const double r = SampsonDistance(E_now, rays_earlier[i], rays_later[i], &d_r_d_E);
+        const Eigen::Matrix<double, 1, 5> J = d_r_d_E * dE_dp;
+        H.noalias() += J.transpose() * J;
+        g.noalias() += J.transpose() * r;
+        cost += r * r;
+      }
+      // Levenberg-Marquardt: damp until the step lowers the cost.
+      bool accepted = false;
+      for (int attempt = 0; attempt < 6 && !accepted; ++attempt) {
+        Eigen::Matrix<double, 5, 5> A = H;
+        A.diagonal() += lambda * H.diagonal() + Eigen::Matrix<double, 5, 1>::Constant(1e-15);
+        const Eigen::Matrix<double, 5, 1> delta = A.ldlt().solve(-g);
+        if (!delta.allFinite()) break;
+        const Eigen::Matrix3d R_new = R * ExpSO3(delta.head<3>());
+        const Eigen::Vector3d t_new = (t + basis * delta.tail<2>()).normalized();
+        const double new_cost =
+            MaskedCost(rays_earlier, rays_later, Eigen::Matrix3d(Skew(t_new) * R_new), selected);
+        if (new_cost < cost) {
+          R = R_new;
+          t = t_new;
+          lambda = std::max(1e-10, 0.1 * lambda);
+          accepted = true;
+        } else {
+          lambda *= 10.0;
+        }
+      }
+      if (!accepted) break;  // at a minimum of this stage's cost
+    }
+  }
+  if (!R.allFinite() || !t.allFinite()) return report;
+
+  const Eigen::Matrix3d E = Skew(t) * R;
+  report.inlier_mask.assign(n, 0);
+  for (size_t i = 0; i < n; ++i) {
+    report.inlier_mask[i] =
+        std::abs(SampsonDistance(E, rays_earlier[i], rays_later[i])) <= options.max_error;
+    report.num_inliers += report.inlier_mask[i];
+  }
+  if (report.num_inliers < kMinInliers) {
+    report.inlier_mask.clear();
+    report.num_inliers = 0;
+    return report;
+  }
+  report.success = true;
+  // Re-orthonormalise R (products of Exp steps drift by rounding only).
+  report.later_from_earlier = Rigid3d(Eigen::Quaterniond(R).normalized(), t);
+  return report;
+}
+
+int CountCheirality(const std::vector<Eigen::Vector3d>& rays_earlier,
+                    const std::vector<Eigen::Vector3d>& rays_later,
+                    const Rigid3d& later_from_earlier, const std::vector<char>& mask,
+                    double max_depth) {
+  const Eigen::Matrix3d R = later_from_earlier.R();
+  const Eigen::Vector3d& t = later_from_earlier.translation;
+  int count = 0;
+  for (size_t i = 0; i < rays_earlier.size(); ++i) {
+    if (!mask.empty() && !mask[i]) continue;
+    // z_l x_l - z_e (R x_e) = t in least squares: with u = R x_e, v = x_l,
+    // [u.u  -u.v; -u.v  v.v] [z_e; z_l] = [-u.t; v.t].
+    const Eigen::Vector3d u = R * rays_earlier[i];
+    const Eigen::Vector3d& v = rays_later[i];
+    const double uu = u.dot(u), uv = u.dot(v), vv = v.dot(v);
+    const double det = uu * vv - uv * uv;
+    if (!(det > 1e-18 * uu * vv)) continue;  // parallel rays: no depth
+    const double ut = u.dot(t), vt = v.dot(t);
+    const double z_e = (-ut * vv + uv * vt) / det;
+    const double z_l = (uu * vt - uv * ut) / det;
+    // Depths along z: the rays have z = 1 (x_l) and z = (R x_e)_z * z_e in the later frame.
+    const double depth_e = z_e * rays_earlier[i].z();
+    const double depth_l = z_l * v.z();
+    if (depth_e > 0.0 && depth_l > 0.0 && depth_e < max_depth && depth_l < max_depth) ++count;
+  }
+  return count;
+}
+
+}  // namespace slapse
