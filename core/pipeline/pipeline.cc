@@ -136,14 +136,14 @@ PipelineStep Pipeline::Process(const AnchorPair& pair) {
   step.times.ekf_ms = MsSince(t0);
   if (step.tracking) {
     trajectory_.push_back({pair.later_index, pair.later_timestamp_s, world_from_cam_});
+    for (const ExtractedPlane& ex : step.extracted) {
+      step.extracted_filter_ids.push_back(ekf_.FilterTrackId(ex.track_id));
+    }
     RecordPlanes(step, pair);
     if (options_.scale.source == ScaleOptions::Source::kCameraHeight && !metric_) {
       MaybeFixScaleFromRoad();
     }
     step.world_from_cam = world_from_cam_;
-    for (const ExtractedPlane& ex : step.extracted) {
-      step.extracted_filter_ids.push_back(ekf_.FilterTrackId(ex.track_id));
-    }
     step.planes = ekf_.planes();
   }
   step.metric = metric_;
@@ -170,8 +170,9 @@ void Pipeline::RecordPlanes(const PipelineStep& step, const AnchorPair& pair) {
     mp.last_seen_s = step.timestamp_s;
     mp.observations = track.observations;
     mp.seen_indices.push_back(step.later_index);
-    for (const ExtractedPlane& ex : step.extracted) {
-      if (ekf_.FilterTrackId(ex.track_id) != track.track_id) continue;
+    for (size_t k = 0; k < step.extracted.size(); ++k) {
+      if (step.extracted_filter_ids[k] != track.track_id) continue;
+      const ExtractedPlane& ex = step.extracted[k];
       mp.mb_indices = ex.mb_indices;
       for (int i : ex.correspondence_indices) {
         if (mp.support_world.size() >= kMaxSupportPointsPerPlane) break;
