@@ -116,14 +116,8 @@ class RtspPullTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     dir_ = new std::string(testing::MakeTempDir("rtsp_pull_test"));
-    SimulateOptions sim;
-    sim.seed = 5;
-    sim.duration_s = 3.0;
-    sim.width_px = 320;
-    sim.height_px = 240;
-    sim.supersampling = 1;
-    sim.encoder.codec = VideoCodec::kMpeg2;
-    auto drive = testing::SimulateTestDrive("rtsp_pull_test_drive", sim);
+    auto drive =
+        testing::SimulateTestDrive("rtsp_pull_test_drive", testing::SmallMpeg2DriveOptions(5, 3.0));
     ASSERT_TRUE(drive.ok()) << drive.status().ToString();
     drive_path_ = new std::string(drive->video_path);
     intrinsics_ = new Intrinsics(drive->intrinsics);

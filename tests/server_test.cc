@@ -182,14 +182,8 @@ class ServerTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     dir_ = new std::string(testing::MakeTempDir("server_test"));
-    SimulateOptions sim;
-    sim.seed = 3;
-    sim.duration_s = 2.0;
-    sim.width_px = 320;
-    sim.height_px = 240;
-    sim.supersampling = 1;
-    sim.encoder.codec = VideoCodec::kMpeg2;
-    auto drive = testing::SimulateTestDrive("server_test_drive", sim);
+    auto drive =
+        testing::SimulateTestDrive("server_test_drive", testing::SmallMpeg2DriveOptions(3, 2.0));
     ASSERT_TRUE(drive.ok()) << drive.status().ToString();
     drive_ = new std::string(testing::ReadFileBytes(drive->video_path));
     drive_path_ = new std::string(drive->video_path);

@@ -170,14 +170,8 @@ class ServiceE2eTest : public ::testing::Test {
   // their offline results, shared by the tests.
   static void SetUpTestSuite() {
     for (uint64_t seed : {21, 22}) {
-      SimulateOptions sim;
-      sim.seed = seed;
-      sim.duration_s = 4.0;
-      sim.width_px = 320;
-      sim.height_px = 240;
-      sim.supersampling = 1;
-      sim.encoder.codec = VideoCodec::kMpeg2;
-      auto drive = testing::SimulateTestDrive("service_e2e", sim);
+      auto drive =
+          testing::SimulateTestDrive("service_e2e", testing::SmallMpeg2DriveOptions(seed, 4.0));
       ASSERT_TRUE(drive.ok()) << drive.status().ToString();
       auto offline = RunOffline(*drive);
       ASSERT_TRUE(offline.ok()) << offline.status().ToString();

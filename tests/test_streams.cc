@@ -62,6 +62,17 @@ Status WritePan(const std::string& path, const EncoderOptions& options, int fram
   return (*enc)->Finish();
 }
 
+SimulateOptions SmallMpeg2DriveOptions(uint64_t seed, double duration_s) {
+  SimulateOptions sim;
+  sim.seed = seed;
+  sim.duration_s = duration_s;
+  sim.width_px = 320;
+  sim.height_px = 240;
+  sim.supersampling = 1;
+  sim.encoder.codec = VideoCodec::kMpeg2;
+  return sim;
+}
+
 StatusOr<TestDrive> SimulateTestDrive(const std::string& tag, SimulateOptions options) {
   TestDrive drive;
   drive.dir = MakeTempDir(tag);

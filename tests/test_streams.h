@@ -33,6 +33,10 @@ struct TestDrive {
   SimulateReport report;
 };
 
+// The small drives the service tests stream: 320x240 MPEG-2 IBBBP without
+// supersampling (quick to render and to process), `duration_s` long.
+SimulateOptions SmallMpeg2DriveOptions(uint64_t seed, double duration_s);
+
 // Simulates a drive with `options` into a fresh temp dir tagged `tag` (the
 // options' output_dir is replaced).
 StatusOr<TestDrive> SimulateTestDrive(const std::string& tag, SimulateOptions options);
