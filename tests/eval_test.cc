@@ -105,5 +105,79 @@ TEST(EvalTest, TrueHomographyMapsSimulatedPlanePointsAndTheDriveScores) {
   EXPECT_GT(stats->recall(), 0.12);
 }
 
+// The seam of two flush facades is labelled mixed (no plane covers 90 % of
+// the block), yet every pixel of it moves as the wall's homography: it counts
+// as a wall block. A seam with the sky, or with a set-back facade, stays mixed.
+TEST(EvalTest, SeamsOfFlushFacadesAreWallBlocks) {
+  GroundTruth gt;
+  gt.intrinsics = Intrinsics::FromHorizontalFov(640, 480, 70.0);
+  gt.mb_cols = 40;
+  gt.mb_rows = 30;
+  gt.fps = 30.0;
+  // Three facades facing the camera (world = the later camera's frame): A and
+  // B flush at z = 10 m, C set back at z = 12 m.
+  for (int id = 0; id < 3; ++id) {
+    GtPlane p;
+    p.id = id;
+    p.kind = PlaneKind::kFacade;
+    p.normal_world = Eigen::Vector3d(0, 0, -1);
+    p.distance_m = id == 2 ? -12.0 : -10.0;
+    gt.planes.push_back(p);
+  }
+  gt.frames.resize(2);
+  gt.frames[0].world_from_cam =
+      Rigid3d(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0.6, 0, -1.0));
+  for (GtFrame& f : gt.frames) f.mb_labels.assign(1200, kMbSky);
+  // Later anchor: column 10 on A, column 11 the seam, column 12 on B, rows 5-14.
+  AnchorPair pair;
+  pair.earlier_index = 0;
+  pair.later_index = 1;
+  pair.mb_cols = 40;
+  pair.mb_rows = 30;
+  ExtractedPlane plane;
+  plane.H_earlier_from_later = TrueHomography(gt, 0, 0, 1);
+  std::vector<int> seam;
+  for (int row = 5; row < 15; ++row) {
+    for (int col = 10; col <= 12; ++col) {
+      const int mb = row * 40 + col;
+      gt.frames[1].mb_labels[mb] = col == 10 ? 0 : col == 12 ? 1 : kMbMixed;
+      if (col == 11) seam.push_back(mb);
+      Correspondence c;
+      c.mb_index = mb;
+      c.x_later_px = Eigen::Vector2d(16 * col + 7.5, 16 * row + 7.5);
+      c.x_earlier_px = (plane.H_earlier_from_later * c.x_later_px.homogeneous()).hnormalized();
+      plane.correspondence_indices.push_back(static_cast<int>(pair.correspondences.size()));
+      plane.mb_indices.push_back(mb);
+      pair.correspondences.push_back(c);
+    }
+  }
+  auto evaluate = [&](const std::vector<MbShare>& seam_shares) {
+    GroundTruth g = gt;
+    if (!seam_shares.empty()) {
+      for (int mb : seam) g.frames[1].mixed_shares[mb] = seam_shares;
+    }
+    return EvaluatePlanes(pair, {plane}, g).matches.at(0);
+  };
+  const PlaneMatch flush = evaluate({{0, 0.55f}, {1, 0.45f}});
+  EXPECT_TRUE(flush.true_positive);
+  EXPECT_EQ(flush.gt_plane, 0);
+  EXPECT_EQ(flush.mixed_share, 0.0);
+  EXPECT_EQ(flush.purity, 1.0);
+  EXPECT_LT(flush.transfer_px, 1e-9);
+  // As for a definite label, up to 10 % of the block may see something else.
+  EXPECT_TRUE(evaluate({{0, 0.55f}, {1, 0.38f}, {kMbClutter, 0.07f}}).true_positive);
+  // 10 of 30 blocks mixed: over the 30 % allowed.
+  for (const std::vector<MbShare>& shares :
+       std::vector<std::vector<MbShare>>{{{0, 0.55f}, {kMbSky, 0.45f}},
+                                         {{0, 0.55f}, {2, 0.45f}},  // parallax ~5 px
+                                         {{0, 0.50f}, {1, 0.38f}, {kMbClutter, 0.12f}},
+                                         {}}) {  // a drive without mb_mixed.txt
+    const PlaneMatch m = evaluate(shares);
+    EXPECT_FALSE(m.true_positive) << shares.size();
+    EXPECT_NEAR(m.mixed_share, 1.0 / 3.0, 1e-12);
+    EXPECT_EQ(m.purity, 1.0);
+  }
+}
+
 }  // namespace
 }  // namespace slapse

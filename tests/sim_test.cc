@@ -4,6 +4,7 @@
 // camera path's speed and vibration, label sanity, and an end-to-end drive.
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <string>
 
 #include <unistd.h>
@@ -407,6 +408,34 @@ TEST(RendererTest, LabelsAreSane) {
     }
   }
   EXPECT_GT(planes, 600);  // most of a street view is planar
+  // Mixed blocks list what their samples see: largest share first, summing
+  // to 1, no label reaching the coverage; the pixels agree.
+  int mixed = 0;
+  for (int mb = 0; mb < 1200; ++mb) {
+    const auto it = f->mb_mixed_shares.find(mb);
+    if (f->mb_labels[mb] != kMbMixed) {
+      EXPECT_EQ(it, f->mb_mixed_shares.end()) << mb;
+      continue;
+    }
+    ++mixed;
+    ASSERT_NE(it, f->mb_mixed_shares.end()) << mb;
+    ASSERT_GE(it->second.size(), 2u);
+    double sum = 0;
+    for (size_t k = 0; k < it->second.size(); ++k) {
+      sum += it->second[k].share;
+      if (k > 0) EXPECT_LE(it->second[k].share, it->second[k - 1].share);
+    }
+    EXPECT_NEAR(sum, 1.0, 1e-5);
+    EXPECT_LT(it->second[0].share, kMbLabelCoverage);
+    int n = 0;  // output pixels whose majority label is the block's largest
+    for (int y = 16 * (mb / 40); y < 16 * (mb / 40) + 16; ++y) {
+      for (int x = 16 * (mb % 40); x < 16 * (mb % 40) + 16; ++x) {
+        n += f->labels.at<int>(y, x) == it->second[0].label;
+      }
+    }
+    EXPECT_NEAR(n / 256.0, it->second[0].share, 0.1) << mb;
+  }
+  EXPECT_GT(mixed, 20);
 }
 
 // Ground truth vs pixels: map every pixel of plane-labelled blocks of frame
@@ -507,6 +536,11 @@ TEST(GroundTruthTest, SaveLoadRoundTrip) {
         Eigen::Vector3d(i * 0.4, -1.0 / 7.0, 1.5));
     f.mb_labels.resize(1200);
     for (int m = 0; m < 1200; ++m) f.mb_labels[m] = (m * 7 + i) % 6 - 3;
+    for (int m = 0; m < 1200; ++m) {
+      if (f.mb_labels[m] == kMbMixed && m % 5 != 0) {
+        f.mixed_shares[m] = {{m % 3, 0.625f}, {kMbSky, 0.25f}, {kMbClutter, 0.125f}};
+      }
+    }
     gt.frames.push_back(f);
   }
   const std::string dir = TempDir("gt");
@@ -532,6 +566,16 @@ TEST(GroundTruthTest, SaveLoadRoundTrip) {
     EXPECT_EQ(back->frames[i].world_from_cam.rotation.coeffs(),
               gt.frames[i].world_from_cam.rotation.coeffs());
     EXPECT_EQ(back->frames[i].mb_labels, gt.frames[i].mb_labels);
+    ASSERT_EQ(back->frames[i].mixed_shares.size(), gt.frames[i].mixed_shares.size());
+    for (const auto& [mb, shares] : gt.frames[i].mixed_shares) {
+      const auto it = back->frames[i].mixed_shares.find(mb);
+      ASSERT_NE(it, back->frames[i].mixed_shares.end()) << mb;
+      ASSERT_EQ(it->second.size(), shares.size());
+      for (size_t k = 0; k < shares.size(); ++k) {
+        EXPECT_EQ(it->second[k].label, shares[k].label);
+        EXPECT_EQ(it->second[k].share, shares[k].share);
+      }
+    }
   }
   // LabelAt: pixel centres on integers, 16 pixels a block.
   EXPECT_EQ(back->LabelAt(1, 0.0, 0.0), gt.frames[1].mb_labels[0]);
@@ -542,6 +586,14 @@ TEST(GroundTruthTest, SaveLoadRoundTrip) {
   EXPECT_EQ(back->LabelAt(5, 10.0, 10.0), kMbMixed);
   EXPECT_STREQ(PlaneKindName(PlaneKind::kBackground), "background");
   // Missing or corrupt files are errors, not crashes.
+  // The shares are optional (older drives); a corrupt line is an error.
+  const auto mixed = std::filesystem::path(dir) / "mb_mixed.txt";
+  { std::ofstream(mixed, std::ios::app) << "1 12 0:1.5\n"; }
+  EXPECT_EQ(LoadGroundTruth(dir).status().code(), StatusCode::kDataLoss);
+  std::filesystem::remove(mixed);
+  auto without = LoadGroundTruth(dir);
+  ASSERT_TRUE(without.ok()) << without.status().ToString();
+  EXPECT_TRUE(without->frames[1].mixed_shares.empty());
   std::filesystem::remove(std::filesystem::path(dir) / "planes.json");
   EXPECT_EQ(LoadGroundTruth(dir).status().code(), StatusCode::kNotFound);
   std::filesystem::remove_all(dir);

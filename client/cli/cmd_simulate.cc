@@ -103,7 +103,7 @@ int RunSimulate(int argc, char** argv) {
               1e3 * report.encode_s / std::max(report.frames, 1));
   std::printf(
       "truth      %s/{trajectory_tum.txt, intrinsics.json, planes.json, mb_labels.txt, "
-      "meta.json}\n",
+      "mb_mixed.txt, meta.json}\n",
       opt.output_dir.c_str());
   return 0;
 }

@@ -28,7 +28,8 @@ PairPlaneEvaluation EvaluatePlanes(const AnchorPair& pair,
                                    const std::vector<ExtractedPlane>& planes, const GroundTruth& gt,
                                    const PlaneTruthOptions& options) {
   PairPlaneEvaluation out;
-  const std::vector<int>& labels = gt.frames[pair.later_index].mb_labels;
+  const GtFrame& frame = gt.frames[pair.later_index];
+  const std::vector<int>& labels = frame.mb_labels;
   std::map<int, int> visible_count;
   for (int l : labels) {
     if (l >= 0) ++visible_count[l];
@@ -53,19 +54,40 @@ PairPlaneEvaluation EvaluatePlanes(const AnchorPair& pair,
     int definite = 0, mixed = 0, consistent = 0;
     for (int i : plane.correspondence_indices) {
       const Correspondence& c = pair.correspondences[i];
-      const int l = labels[c.mb_index];
+      const Eigen::Vector3d x = c.x_later_px.homogeneous();
+      // The true plane `id` at this block moves as the extracted homography says.
+      auto moves_as_h = [&](int id) {
+        return ((plane.H_earlier_from_later * x).hnormalized() - (true_h(id) * x).hnormalized())
+                   .norm() <= options.max_transfer_px;
+      };
+      int l = labels[c.mb_index];
       if (l == kMbMixed) {
-        ++mixed;
+        // A block on the seam of surfaces that all move as H (flush facades)
+        // is on "the wall" like a definite block: its samples on such planes
+        // reach the labelling coverage. It counts for the largest of them.
+        const auto it = frame.mixed_shares.find(c.mb_index);
+        double on_h = 0.0;
+        int largest = -1;
+        if (it != frame.mixed_shares.end()) {
+          for (const MbShare& part : it->second) {
+            if (part.label < 0 || !moves_as_h(part.label)) continue;
+            on_h += part.share;
+            if (largest < 0) largest = part.label;  // shares are sorted, largest first
+          }
+        }
+        if (on_h < kMbLabelCoverage - 1e-6) {
+          ++mixed;
+          continue;
+        }
+        ++definite;
+        ++count[largest];
+        ++consistent;
         continue;
       }
       ++definite;
       ++count[l];
       if (l < 0) continue;
-      // The block's true surface moves as the extracted homography says.
-      const Eigen::Vector3d x = c.x_later_px.homogeneous();
-      const double d =
-          ((plane.H_earlier_from_later * x).hnormalized() - (true_h(l) * x).hnormalized()).norm();
-      consistent += d <= options.max_transfer_px;
+      consistent += moves_as_h(l);
     }
     int best = -1, best_count = 0;
     for (const auto& [l, c] : count) {

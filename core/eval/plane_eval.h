@@ -11,7 +11,12 @@
 //     against it, while adjacent facades too close to coplanar for a 1 px
 //     homography to tell apart count as one surface (as a person labelling
 //     "the wall" would); and at most `max_mixed_share` of all its blocks are
-//     mixed; and
+//     mixed. A block labelled mixed whose samples lie, to the labelling
+//     coverage (kMbLabelCoverage), on true planes that all move as H says at
+//     the block -- the seam of two flush facades -- is such a wall block (a
+//     definite one, counted for the largest of those planes); without the
+//     shares (drives simulated before mb_mixed.txt) every mixed block counts
+//     as mixed; and
 //  2. geometry: its homography agrees with the true plane-induced homography
 //     H_true = K (R + t n^T / d) K^-1 of its majority true plane P (true
 //     poses of the two anchors, P in the later camera): the mean transfer

@@ -204,6 +204,18 @@ Status SaveGroundTruth(const GroundTruth& gt, const std::string& dir) {
   }
   SLAPSE_RETURN_IF_ERROR(WriteFile(root / "mb_labels.txt", mb.str()));
 
+  std::ostringstream mixed;
+  mixed << "# frame_index mb_index label:share... (the blocks labelled " << kMbMixed
+        << " in mb_labels.txt: what their pixels see, largest share first)\n";
+  for (size_t i = 0; i < gt.frames.size(); ++i) {
+    for (const auto& [mb_index, shares] : gt.frames[i].mixed_shares) {
+      mixed << i << ' ' << mb_index;
+      for (const MbShare& s : shares) mixed << ' ' << s.label << ':' << s.share;
+      mixed << '\n';
+    }
+  }
+  SLAPSE_RETURN_IF_ERROR(WriteFile(root / "mb_mixed.txt", mixed.str()));
+
   // Minimal meta.json; SimulateDrive replaces it with a superset.
   std::ostringstream meta;
   meta << "{\n  \"fps\": " << Num(gt.fps) << ",\n  \"frames\": " << gt.frames.size()
@@ -325,6 +337,38 @@ StatusOr<GroundTruth> LoadGroundTruth(const std::string& dir) {
     if (frame != gt.frames.size()) {
       return DataLossError(path.string() + ": " + std::to_string(frame) + " label lines for " +
                            std::to_string(gt.frames.size()) + " poses");
+    }
+  }
+
+  // Optional: drives simulated before mb_mixed.txt existed have no shares.
+  if (const auto path = root / "mb_mixed.txt"; std::filesystem::exists(path)) {
+    std::ifstream in(path);
+    std::string line;
+    int line_no = 0;
+    while (std::getline(in, line)) {
+      ++line_no;
+      if (line.empty() || line[0] == '#') continue;
+      const std::string where = path.string() + ":" + std::to_string(line_no);
+      std::istringstream ls(line);
+      long frame;
+      int mb_index;
+      if (!(ls >> frame >> mb_index) || frame < 0 || frame >= static_cast<long>(gt.frames.size()) ||
+          mb_index < 0 || mb_index >= gt.mb_cols * gt.mb_rows) {
+        return DataLossError(where + ": bad frame or macroblock index");
+      }
+      std::vector<MbShare>& shares = gt.frames[frame].mixed_shares[mb_index];
+      std::string item;
+      while (ls >> item) {
+        MbShare share;
+        char colon = 0;
+        std::istringstream is(item);
+        if (!(is >> share.label >> colon >> share.share) || colon != ':' ||
+            !(share.share > 0.0f && share.share <= 1.0f)) {
+          return DataLossError(where + ": bad label:share '" + item + "'");
+        }
+        shares.push_back(share);
+      }
+      if (shares.empty()) return DataLossError(where + ": no shares");
     }
   }
 

@@ -6,9 +6,12 @@
 //   intrinsics.json     fx_px, fy_px, cx_px, cy_px, width_px, height_px (core/common/camera.h)
 //   planes.json         every plane: id, kind, normal_world, distance_m (n . X = d), polygons
 //   mb_labels.txt       per frame, per 16x16 macroblock: which plane it sees (see MbLabel)
+//   mb_mixed.txt        per mixed macroblock: the labels its pixels see and their shares
+//                       (optional: drives simulated before it existed have none)
 //   meta.json           seed, codec, GOP, fps, frame count, distance driven, timings
 #pragma once
 
+#include <map>
 #include <string>
 #include <vector>
 
@@ -39,10 +42,20 @@ struct GtPlane {
 enum MbLabel : int { kMbSky = -1, kMbClutter = -2, kMbMixed = -3 };
 constexpr double kMbLabelCoverage = 0.9;
 
+// One label seen by part of a macroblock: `share` of its pixels (supersamples).
+struct MbShare {
+  int label = kMbSky;  // plane id, kMbSky or kMbClutter
+  float share = 0.0f;  // (0, 1]
+};
+
 struct GtFrame {
   double timestamp_s = 0.0;
   Rigid3d world_from_cam;
   std::vector<int> mb_labels;  // row-major, mb_cols * mb_rows
+  // For the blocks labelled kMbMixed (key: row-major MB index): every label
+  // their pixels see, largest share first; the shares sum to 1. A block on the
+  // seam of two flush facades is mixed yet all on planes (core/eval/plane_eval.h).
+  std::map<int, std::vector<MbShare>> mixed_shares;
 };
 
 struct GroundTruth {

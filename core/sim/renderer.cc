@@ -590,7 +590,8 @@ Status Renderer::Render(const Rigid3d& world_from_cam, RenderedFrame* frame) {
       out[x] = best;
     }
   }
-  frame->mb_labels = MacroblockLabels(sample_labels, ss, &frame->mb_cols, &frame->mb_rows);
+  frame->mb_labels = MacroblockLabels(sample_labels, ss, &frame->mb_cols, &frame->mb_rows,
+                                      &frame->mb_mixed_shares);
 
   // Drop tiles nobody used for a while.
   for (auto it = tiles_.begin(); it != tiles_.end();) {
@@ -606,7 +607,8 @@ Status Renderer::Render(const Rigid3d& world_from_cam, RenderedFrame* frame) {
 }
 
 std::vector<int> MacroblockLabels(const cv::Mat& sample_labels, int supersampling, int* mb_cols,
-                                  int* mb_rows) {
+                                  int* mb_rows, std::map<int, std::vector<MbShare>>* mixed_shares) {
+  if (mixed_shares != nullptr) mixed_shares->clear();
   const int ss = supersampling;
   const int W = sample_labels.cols / ss, H = sample_labels.rows / ss;
   const int cols = (W + 15) / 16, rows = (H + 15) / 16;
@@ -637,9 +639,16 @@ std::vector<int> MacroblockLabels(const cv::Mat& sample_labels, int supersamplin
         }
       }
       const int total = (y1 - y0) * (x1 - x0);
+      const size_t mb = static_cast<size_t>(by) * cols + bx;
       for (const auto& [label, n] : counts) {
-        if (static_cast<double>(n) >= kMbLabelCoverage * total) {
-          labels[static_cast<size_t>(by) * cols + bx] = label;
+        if (static_cast<double>(n) >= kMbLabelCoverage * total) labels[mb] = label;
+      }
+      if (labels[mb] == kMbMixed && mixed_shares != nullptr) {
+        std::sort(counts.begin(), counts.end(),
+                  [](const auto& a, const auto& b) { return a.second > b.second; });
+        std::vector<MbShare>& shares = (*mixed_shares)[static_cast<int>(mb)];
+        for (const auto& [label, n] : counts) {
+          shares.push_back({label, static_cast<float>(n) / total});
         }
       }
     }

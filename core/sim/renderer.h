@@ -34,6 +34,7 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <memory>
 #include <unordered_map>
 #include <vector>
@@ -59,7 +60,8 @@ struct RenderedFrame {
   cv::Mat bgr;     // CV_8UC3, output size
   cv::Mat labels;  // CV_32S, output size: the label most of the pixel's samples see
   int mb_cols = 0, mb_rows = 0;
-  std::vector<int> mb_labels;  // row-major, mb_cols * mb_rows
+  std::vector<int> mb_labels;                           // row-major, mb_cols * mb_rows
+  std::map<int, std::vector<MbShare>> mb_mixed_shares;  // mixed blocks: what they see
 };
 
 struct RenderStats {
@@ -111,8 +113,10 @@ StatusOr<RenderedFrame> RenderFrame(const Scene& scene, const Intrinsics& intrin
                                     const RenderOptions& options = {});
 
 // Macroblock labels from a per-sample label image (CV_32S, `supersampling`
-// times the output size), by the rule above.
+// times the output size), by the rule above; with `mixed_shares`, also the
+// labels each mixed block's samples see and their shares, largest first.
 std::vector<int> MacroblockLabels(const cv::Mat& sample_labels, int supersampling, int* mb_cols,
-                                  int* mb_rows);
+                                  int* mb_rows,
+                                  std::map<int, std::vector<MbShare>>* mixed_shares = nullptr);
 
 }  // namespace slapse

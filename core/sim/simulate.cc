@@ -81,6 +81,7 @@ Status SimulateDrive(const SimulateOptions& o, SimulateReport* report) {
     f.timestamp_s = drive.path.timestamps_s[i];
     f.world_from_cam = drive.path.world_from_cam[i];
     f.mb_labels = frame.mb_labels;
+    f.mixed_shares = frame.mb_mixed_shares;
     gt.mb_cols = frame.mb_cols;
     gt.mb_rows = frame.mb_rows;
     gt.frames.push_back(std::move(f));

@@ -6,7 +6,8 @@
 //   SimulateReport report;
 //   Status s = SimulateDrive(opt, &report);
 //   // /tmp/drive7: drive.ts, trajectory_tum.txt, intrinsics.json, planes.json,
-//   //              mb_labels.txt, meta.json (formats in core/sim/ground_truth.h)
+//   //              mb_labels.txt, mb_mixed.txt, meta.json (formats in
+//   //              core/sim/ground_truth.h)
 #pragma once
 
 #include <cstdint>
