@@ -154,7 +154,8 @@ int RunEvalPlanes(int argc, char** argv) {
                  "drive,later_index,track_id,tracked,mbs,mean_mb_row,gt_plane,gt_kind,purity,"
                  "mixed_share,transfer_px,true_positive,rms_transfer_px,track_change,"
                  "mean_imvs,e_inlier_share,median_parallax_px,hole_share,boundary_share,"
-                 "fill_share,bbox_fill,near2,near3,back_fit,back_fit15,normal_down\n");
+                 "fill_share,bbox_fill,near2,near3,back_fit,back_fit15,normal_down,"
+                 "motion_rot_err_deg,motion_dir_err_deg\n");
   }
   std::vector<std::string> dirs;
   for (double seed : *seeds) {

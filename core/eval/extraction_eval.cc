@@ -6,6 +6,7 @@
 #include <fstream>
 #include <optional>
 
+#include "core/common/so3.h"
 #include "core/estimators/epipolar_plane.h"
 #include "core/mv/mv_reader.h"
 
@@ -207,6 +208,18 @@ StatusOr<ExtractionStats> EvaluateExtraction(const std::string& drive_dir,
     if (!extraction.ok()) return extraction.status();
     const PairPlaneEvaluation ev = EvaluatePlanes(*pair, extraction->planes, *gt, options.truth);
     if (options.planes_csv != nullptr) {
+      // The pair's estimated motion against the truth: rotation error and the
+      // angle between the translation directions (-1 without a motion).
+      double rot_err_deg = -1, dir_err_deg = -1;
+      if (inf->has_motion) {
+        const Rigid3d true_lfe = gt->frames[pair->later_index].world_from_cam.Inverse() *
+                                 gt->frames[pair->earlier_index].world_from_cam;
+        constexpr double kDeg = 180.0 / M_PI;
+        rot_err_deg = kDeg * LogSO3(inf->later_from_earlier.R() * true_lfe.R().transpose()).norm();
+        const double c =
+            inf->later_from_earlier.translation.normalized().dot(true_lfe.translation.normalized());
+        dir_err_deg = kDeg * std::acos(std::clamp(c, -1.0, 1.0));
+      }
       for (size_t k = 0; k < ev.matches.size(); ++k) {
         const PlaneMatch& m = ev.matches[k];
         const ExtractedPlane& p = extraction->planes[k];
@@ -219,7 +232,7 @@ StatusOr<ExtractionStats> EvaluateExtraction(const std::string& drive_dir,
                       options.extraction.eps_h_px, &shape);
         std::fprintf(options.planes_csv,
                      "%s,%lld,%d,%d,%zu,%.1f,%d,%s,%.3f,%.3f,%.3f,%d,%.3f,%.3f,"
-                     "%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f\n",
+                     "%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.4f,%.3f\n",
                      drive_dir.c_str(), static_cast<long long>(pair->later_index), m.track_id,
                      p.tracked ? 1 : 0, p.mb_indices.size(), mean_row, m.gt_plane,
                      m.gt_plane >= 0 ? PlaneKindName(gt->planes[m.gt_plane].kind) : "none",
@@ -228,7 +241,8 @@ StatusOr<ExtractionStats> EvaluateExtraction(const std::string& drive_dir,
                      shape.median_parallax_px, shape.hole_share, shape.boundary_share,
                      shape.fill_share, shape.bbox_fill, shape.near2, shape.near3, shape.back_fit,
                      shape.back_fit15,
-                     p.m_later ? std::abs(p.m_later->y()) / p.m_later->norm() : -1.0);
+                     p.m_later ? std::abs(p.m_later->y()) / p.m_later->norm() : -1.0, rot_err_deg,
+                     dir_err_deg);
       }
     }
     prev_pair = *pair;
