@@ -885,8 +885,8 @@ TEST(PlaneExtractorTest, StreetPriorRejectsObliquePlanes) {
 }
 
 // A camera rolled by 12 degrees: the side facades' normals are 12 degrees
-// off its x-z plane, so the prior (8 degrees around the camera's y axis at
-// first) rejects them in the first pair; the road found there teaches it the
+// off its x-z plane, so the prior (5 + 3 degrees around the camera's y axis
+// at first) rejects them in the first pair; the road found there teaches it the
 // vertical, and the next pair has its facades.
 TEST(PlaneExtractorTest, StreetPriorLearnsTheVerticalFromTheRoad) {
   SceneNoise noise1, noise2;
@@ -915,6 +915,47 @@ TEST(PlaneExtractorTest, StreetPriorLearnsTheVerticalFromTheRoad) {
   EXPECT_EQ(labels2[kRoad], 1);
   EXPECT_EQ(labels2[kLeftFacade], 1);
   EXPECT_EQ(labels2[kRightFacade], 1);
+}
+
+// A wall leaning by 6.5 degrees, level camera: the first pair knows the
+// vertical only as the camera's y axis, so the facade tolerance is widened
+// (5 + 3 degrees) and the wall is kept; the road found there teaches the
+// vertical, and from then on 5 degrees hold and the wall is rejected.
+TEST(PlaneExtractorTest, StreetPriorTightensOnceTheVerticalIsLearnt) {
+  SceneNoise noise1, noise2;
+  noise1.seed = 24;
+  noise2.seed = 25;
+  std::vector<ScenePlane> scene = Street();
+  ASSERT_EQ(scene[2].label, kRightFacade);
+  const double tilt = 6.5 * kDegToRad;
+  scene[2].n = Eigen::Vector3d(std::cos(tilt), -std::sin(tilt), 0.0);
+  scene[2].d = 5.0 * std::cos(tilt);
+  auto at = [](const Eigen::Vector3d& centre, double yaw_deg) {
+    return Rigid3d(
+               Eigen::AngleAxisd(yaw_deg * kDegToRad, Eigen::Vector3d::UnitY()).toRotationMatrix(),
+               centre)
+        .Inverse();
+  };
+  const Rigid3d f0 = at({0, 0, 0}, 0.0), f1 = at({0.05, 0, 1.0}, 1.5),
+                f2 = at({0.12, -0.02, 2.0}, 3.0);
+  const SyntheticPair s1 = MakePair(f0, f1, 0, noise1, scene);
+  const SyntheticPair s2 = MakePair(f1, f2, 1, noise2, scene);
+  PlaneExtractionOptions options;
+  ASSERT_EQ(options.max_facade_tilt_deg, 5.0);
+  ASSERT_EQ(options.unlearnt_vertical_margin_deg, 3.0);
+  PlaneExtractor extractor(options);
+  std::map<int, int> labels1, labels2;
+  const PlaneExtractionResult r1 = ExtractPlanes(&extractor, s1, nullptr, /*with_motion=*/true);
+  for (const ExtractedPlane& p : r1.planes) ++labels1[DominantLabel(p, s1)];
+  EXPECT_EQ(labels1[kRoad], 1);
+  EXPECT_EQ(labels1[kLeftFacade], 1);
+  EXPECT_EQ(labels1[kRightFacade], 1);
+  const PlaneExtractionResult r2 = ExtractPlanes(&extractor, s2, nullptr, /*with_motion=*/true);
+  for (const ExtractedPlane& p : r2.planes) ++labels2[DominantLabel(p, s2)];
+  EXPECT_EQ(labels2[kRoad], 1);
+  EXPECT_EQ(labels2[kLeftFacade], 1);
+  EXPECT_EQ(labels2[kRightFacade], 0);
+  EXPECT_GE(r2.num_tracks_lost, 1);
 }
 
 // Noise-free correspondences on MB cells `cells` (row-major indices of the

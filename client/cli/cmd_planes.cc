@@ -131,7 +131,11 @@ int RunEvalPlanes(int argc, char** argv) {
         std::to_string(PlaneExtractionOptions{}.boundary_residual_frac)},
        {"boundary-ignore-empty", "",
         "with --boundary-frac: cells without MVs do not make a block a border block", ""},
-       {"drop-e-outliers", "", "fit planes to the essential matrix's inliers only", ""}});
+       {"drop-e-outliers", "", "fit planes to the essential matrix's inliers only", ""},
+       {"facade-tilt-deg", "DEG",
+        "street-scene prior: largest tilt of a wall's normal from horizontal (negative: "
+        "prior off)",
+        std::to_string(PlaneExtractionOptions{}.max_facade_tilt_deg)}});
   if (Status s = flags.Parse(argc, argv); !s.ok()) return Fail("eval-planes", s.message(), 2);
   if (flags.help_requested()) {
     std::printf("%s", flags.Usage().c_str());
@@ -142,8 +146,9 @@ int RunEvalPlanes(int argc, char** argv) {
   auto duration = flags.GetDouble("duration-s", 1, 600);
   auto tau = flags.GetDouble("tau-inf", 0, 100);
   auto boundary_frac = flags.GetDouble("boundary-frac", -1, 10);
+  auto facade_tilt = flags.GetDouble("facade-tilt-deg", -1, 90);
   for (const Status* s : {&seeds.status(), &eps_list.status(), &duration.status(), &tau.status(),
-                          &boundary_frac.status()}) {
+                          &boundary_frac.status(), &facade_tilt.status()}) {
     if (!s->ok()) return Fail("eval-planes", s->message(), 2);
   }
   std::unique_ptr<std::FILE, int (*)(std::FILE*)> csv(nullptr, &std::fclose);
@@ -155,7 +160,8 @@ int RunEvalPlanes(int argc, char** argv) {
                  "mixed_share,transfer_px,true_positive,rms_transfer_px,track_change,"
                  "mean_imvs,e_inlier_share,median_parallax_px,hole_share,boundary_share,"
                  "fill_share,bbox_fill,near2,near3,back_fit,back_fit15,normal_down,"
-                 "motion_rot_err_deg,motion_dir_err_deg\n");
+                 "motion_rot_err_deg,motion_dir_err_deg,vertical_err_deg,normal_true_down,"
+                 "normal_learnt_down\n");
   }
   std::vector<std::string> dirs;
   for (double seed : *seeds) {
@@ -180,6 +186,7 @@ int RunEvalPlanes(int argc, char** argv) {
     eo.extraction.use_motion = !flags.Has("free-homography");
     eo.infinity.tau_inf_px = *tau;
     eo.extraction.boundary_residual_frac = *boundary_frac;
+    eo.extraction.max_facade_tilt_deg = *facade_tilt;
     if (flags.Has("drop-e-outliers")) eo.extraction.drop_e_outliers = true;
     if (flags.Has("boundary-ignore-empty")) eo.extraction.boundary_ignore_empty = true;
     eo.planes_csv = csv.get();

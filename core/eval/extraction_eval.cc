@@ -220,6 +220,11 @@ StatusOr<ExtractionStats> EvaluateExtraction(const std::string& drive_dir,
             inf->later_from_earlier.translation.normalized().dot(true_lfe.translation.normalized());
         dir_err_deg = kDeg * std::acos(std::clamp(c, -1.0, 1.0));
       }
+      // The extractor's learnt vertical against the true one (later camera frame).
+      const Eigen::Vector3d true_down =
+          gt->frames[pair->later_index].world_from_cam.R().transpose() * Eigen::Vector3d(0, 0, -1);
+      const double vertical_err_deg =
+          180.0 / M_PI * std::acos(std::clamp(extractor.vertical_down().dot(true_down), -1.0, 1.0));
       for (size_t k = 0; k < ev.matches.size(); ++k) {
         const PlaneMatch& m = ev.matches[k];
         const ExtractedPlane& p = extraction->planes[k];
@@ -230,19 +235,23 @@ StatusOr<ExtractionStats> EvaluateExtraction(const std::string& drive_dir,
         if (prev_pair)
           BackwardFit(*pair, *inf, *prev_pair, *prev_inf, gt->intrinsics, p,
                       options.extraction.eps_h_px, &shape);
-        std::fprintf(options.planes_csv,
-                     "%s,%lld,%d,%d,%zu,%.1f,%d,%s,%.3f,%.3f,%.3f,%d,%.3f,%.3f,"
-                     "%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.4f,%.3f\n",
-                     drive_dir.c_str(), static_cast<long long>(pair->later_index), m.track_id,
-                     p.tracked ? 1 : 0, p.mb_indices.size(), mean_row, m.gt_plane,
-                     m.gt_plane >= 0 ? PlaneKindName(gt->planes[m.gt_plane].kind) : "none",
-                     m.purity, m.mixed_share, m.transfer_px, m.true_positive ? 1 : 0,
-                     p.rms_transfer_px, p.track_change, shape.mean_imvs, shape.e_inlier_share,
-                     shape.median_parallax_px, shape.hole_share, shape.boundary_share,
-                     shape.fill_share, shape.bbox_fill, shape.near2, shape.near3, shape.back_fit,
-                     shape.back_fit15,
-                     p.m_later ? std::abs(p.m_later->y()) / p.m_later->norm() : -1.0, rot_err_deg,
-                     dir_err_deg);
+        std::fprintf(
+            options.planes_csv,
+            "%s,%lld,%d,%d,%zu,%.1f,%d,%s,%.3f,%.3f,%.3f,%d,%.3f,%.3f,"
+            "%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.4f,%.3f,%.3f,%.4f,"
+            "%.4f\n",
+            drive_dir.c_str(), static_cast<long long>(pair->later_index), m.track_id,
+            p.tracked ? 1 : 0, p.mb_indices.size(), mean_row, m.gt_plane,
+            m.gt_plane >= 0 ? PlaneKindName(gt->planes[m.gt_plane].kind) : "none", m.purity,
+            m.mixed_share, m.transfer_px, m.true_positive ? 1 : 0, p.rms_transfer_px,
+            p.track_change, shape.mean_imvs, shape.e_inlier_share, shape.median_parallax_px,
+            shape.hole_share, shape.boundary_share, shape.fill_share, shape.bbox_fill, shape.near2,
+            shape.near3, shape.back_fit, shape.back_fit15,
+            p.m_later ? std::abs(p.m_later->y()) / p.m_later->norm() : -1.0, rot_err_deg,
+            dir_err_deg, vertical_err_deg,
+            p.m_later ? std::abs(p.m_later->dot(true_down)) / p.m_later->norm() : -1.0,
+            p.m_later ? std::abs(p.m_later->dot(extractor.vertical_down())) / p.m_later->norm()
+                      : -1.0);
       }
     }
     prev_pair = *pair;

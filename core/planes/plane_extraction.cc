@@ -471,8 +471,10 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
   auto orientation_ok = [&](const ExtractedPlane& plane) {
     if (options_.max_facade_tilt_deg < 0 || options_.max_road_tilt_deg < 0) return true;
     if (!plane.m_later.has_value() || !(plane.m_later->norm() > 0)) return true;
-    return down_component(plane) <= std::sin(options_.max_facade_tilt_deg * M_PI / 180.0) ||
-           is_road(plane);
+    const double facade_tilt_deg =
+        options_.max_facade_tilt_deg +
+        (vertical_learnt_ ? 0.0 : std::max(0.0, options_.unlearnt_vertical_margin_deg));
+    return down_component(plane) <= std::sin(facade_tilt_deg * M_PI / 180.0) || is_road(plane);
   };
 
   // 1. Tracking.
@@ -573,6 +575,7 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
   if (road_blocks > 0) {
     const double weight = road_blocks / (road_blocks + 100.0);  // 100 blocks: half way
     down_ = ((1.0 - weight) * down_ + weight * road_sum.normalized()).normalized();
+    vertical_learnt_ = true;
   }
 
   // 3. Remember the planes' MB cells in this pair's later anchor.

@@ -134,8 +134,19 @@ struct PlaneExtractionOptions {
   // 108 such planes were false positives). A rejected new plane's inliers
   // are set aside like a plane too small; a rejected track is lost. A
   // negative angle turns the prior off (scenes that are not streets).
-  double max_facade_tilt_deg = 8.0;
+  // 5 deg: the learnt vertical is within 0.3 deg of the truth (median; 90 %
+  // within 1.2 deg) and 90 % of true facade planes within 3.1 deg of
+  // vertical, false positives spread wider (median 2.7 deg). Simulated
+  // drives, eps_h = 1 px, TP / recall: 8 deg 89.5 / 50.2 %, 6 deg 90.5 /
+  // 48.9 %, 5 deg 90.9 / 48.8 %, 4 deg 91.4 / 48.1 %; Table II mean eps_D
+  // 2.84 % at 8 deg, 2.65 % at 5 deg.
+  double max_facade_tilt_deg = 5.0;
   double max_road_tilt_deg = 15.0;
+  // Until a road plane has taught the vertical, the camera's y axis stands
+  // in for it, and a camera pitched or rolled by a few degrees tilts every
+  // wall by as much: the facade tolerance is widened by this margin until
+  // then.
+  double unlearnt_vertical_margin_deg = 3.0;
   // Boundary trim (beyond the paper): after the refits, blocks on the border
   // of the kept set (an 8-neighbour cell inside the grid not in the set) whose
   // transfer error exceeds boundary_residual_frac * eps_h_px are dropped, and
@@ -219,6 +230,10 @@ class PlaneExtractor {
   // Forgets the remembered planes (track ids keep increasing).
   void Reset();
 
+  // The street-scene prior's vertical (unit, pointing down) in the camera
+  // frame of the last later anchor processed.
+  const Eigen::Vector3d& vertical_down() const { return down_; }
+
  private:
   struct Track {
     int track_id;
@@ -231,6 +246,7 @@ class PlaneExtractor {
   // The vertical (unit, pointing down) in the camera frame of the last later
   // anchor: the street-scene prior's reference.
   Eigen::Vector3d down_ = Eigen::Vector3d::UnitY();
+  bool vertical_learnt_ = false;  // down_ has been refined by a road plane
   int64_t last_later_index_ = -1;
   bool has_previous_ = false;
   int next_track_id_ = 0;
