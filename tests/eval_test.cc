@@ -103,6 +103,10 @@ TEST(EvalTest, TrueHomographyMapsSimulatedPlanePointsAndTheDriveScores) {
   EXPECT_GT(stats->planes, 2 * stats->pairs);
   EXPECT_GT(stats->tp_rate(), 0.12);
   EXPECT_GT(stats->recall(), 0.12);
+  // Planes with >= 20 kept MBs are a subset of the visible ones.
+  EXPECT_GT(stats->visible_kept, 0);
+  EXPECT_LE(stats->visible_kept, stats->visible);
+  EXPECT_LE(stats->found_kept, stats->found);
 }
 
 // The seam of two flush facades is labelled mixed (no plane covers 90 % of

@@ -178,7 +178,8 @@ int RunEvalPlanes(int argc, char** argv) {
   }
   std::printf(
       "| eps_h (px) | anchor pairs | planes extracted | TP rate | recall (all visible) | "
-      "recall (road + facades) |\n|---:|---:|---:|---:|---:|---:|\n");
+      "recall (road + facades) | recall (>= 20 kept MBs) |\n"
+      "|---:|---:|---:|---:|---:|---:|---:|\n");
   ExtractionStats last;
   for (double eps : *eps_list) {
     ExtractionEvalOptions eo;
@@ -196,9 +197,9 @@ int RunEvalPlanes(int argc, char** argv) {
       if (!stats.ok()) return Fail("eval-planes", dir + ": " + stats.status().ToString());
       total.Add(*stats);
     }
-    std::printf("| %.1f | %d | %d | %.1f %% | %.1f %% | %.1f %% |\n", eps, total.pairs,
+    std::printf("| %.1f | %d | %d | %.1f %% | %.1f %% | %.1f %% | %.1f %% |\n", eps, total.pairs,
                 total.planes, 100 * total.tp_rate(), 100 * total.recall(),
-                100 * total.recall_near());
+                100 * total.recall_near(), 100 * total.recall_kept());
     last = total;
   }
   if (last.pairs > 0) {

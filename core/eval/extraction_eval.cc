@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <map>
 #include <optional>
 
 #include "core/common/so3.h"
@@ -167,6 +168,8 @@ void ExtractionStats::Add(const ExtractionStats& o) {
   visible_near += o.visible_near;
   found += o.found;
   found_near += o.found_near;
+  visible_kept += o.visible_kept;
+  found_kept += o.found_kept;
   merge_ms += o.merge_ms;
   threshold_ms += o.threshold_ms;
   fit_ms += o.fit_ms;
@@ -263,6 +266,16 @@ StatusOr<ExtractionStats> EvaluateExtraction(const std::string& drive_dir,
     stats.visible_near += static_cast<int>(ev.visible_near.size());
     stats.found += static_cast<int>(ev.found.size());
     for (int id : ev.found) stats.found_near += ev.visible_near.count(id);
+    std::map<int, int> kept_on;  // true plane -> kept correspondences on its blocks
+    for (int i : inf->kept_indices) {
+      const int label = gt->frames[pair->later_index].mb_labels[pair->correspondences[i].mb_index];
+      if (label >= 0) ++kept_on[label];
+    }
+    for (const auto& [id, n] : kept_on) {
+      if (n < options.truth.min_visible_mbs || ev.visible.count(id) == 0) continue;
+      ++stats.visible_kept;
+      stats.found_kept += ev.found.count(id);
+    }
   }
   if (s.code() != StatusCode::kOutOfRange) return s;
   return stats;

@@ -19,6 +19,10 @@ struct ExtractionStats {
   int true_positives = 0;
   int visible = 0, visible_near = 0;  // true planes visible (>= 20 MBs), summed over pairs
   int found = 0, found_near = 0;      // ... of which a true positive found
+  // Visible true planes that also kept >= 20 correspondences after the
+  // plane-at-infinity threshold (the ones extraction could find: the others
+  // lack MVs or parallax), summed over pairs, and how many were found.
+  int visible_kept = 0, found_kept = 0;
   // Wall time per stage, summed over pairs (milliseconds).
   double merge_ms = 0, threshold_ms = 0, fit_ms = 0;
 
@@ -26,6 +30,9 @@ struct ExtractionStats {
   double recall() const { return visible > 0 ? static_cast<double>(found) / visible : 0; }
   double recall_near() const {
     return visible_near > 0 ? static_cast<double>(found_near) / visible_near : 0;
+  }
+  double recall_kept() const {
+    return visible_kept > 0 ? static_cast<double>(found_kept) / visible_kept : 0;
   }
   void Add(const ExtractionStats& o);
 };
