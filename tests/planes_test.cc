@@ -56,6 +56,16 @@ std::vector<ScenePlane> Street() {
   };
 }
 
+// Street() with the right facade leaning over the street by `tilt_deg`,
+// still through the point 5 m to the right of the camera.
+std::vector<ScenePlane> StreetWithLeaningRightFacade(double tilt_deg) {
+  std::vector<ScenePlane> scene = Street();
+  const double tilt = tilt_deg * kDegToRad;
+  scene[2].n = Eigen::Vector3d(std::cos(tilt), -std::sin(tilt), 0.0);
+  scene[2].d = 5.0 * std::cos(tilt);
+  return scene;
+}
+
 // cam_from_world of a camera at `centre` with yaw (about y) and pitch (about x).
 Rigid3d CamFromWorld(const Eigen::Vector3d& centre, double yaw_deg, double pitch_deg) {
   const Eigen::Matrix3d world_from_cam_r =
@@ -865,11 +875,8 @@ TEST(PlaneExtractorTest, MotionConstrainedTrackIsLostWhenItsMbsShowAnotherSurfac
 TEST(PlaneExtractorTest, StreetPriorRejectsObliquePlanes) {
   SceneNoise noise;
   noise.seed = 21;
-  std::vector<ScenePlane> scene = Street();
+  const std::vector<ScenePlane> scene = StreetWithLeaningRightFacade(35.0);
   ASSERT_EQ(scene[2].label, kRightFacade);
-  const double tilt = 35.0 * kDegToRad;
-  scene[2].n = Eigen::Vector3d(std::cos(tilt), -std::sin(tilt), 0.0);  // leans over the street
-  scene[2].d = 5.0 * std::cos(tilt);
   const SyntheticPair s = MakePair(Frame0(), Frame1(), 0, noise, scene);
   for (bool prior : {true, false}) {
     PlaneExtractionOptions options;
@@ -925,19 +932,10 @@ TEST(PlaneExtractorTest, StreetPriorTightensOnceTheVerticalIsLearnt) {
   SceneNoise noise1, noise2;
   noise1.seed = 24;
   noise2.seed = 25;
-  std::vector<ScenePlane> scene = Street();
+  const std::vector<ScenePlane> scene = StreetWithLeaningRightFacade(6.5);
   ASSERT_EQ(scene[2].label, kRightFacade);
-  const double tilt = 6.5 * kDegToRad;
-  scene[2].n = Eigen::Vector3d(std::cos(tilt), -std::sin(tilt), 0.0);
-  scene[2].d = 5.0 * std::cos(tilt);
-  auto at = [](const Eigen::Vector3d& centre, double yaw_deg) {
-    return Rigid3d(
-               Eigen::AngleAxisd(yaw_deg * kDegToRad, Eigen::Vector3d::UnitY()).toRotationMatrix(),
-               centre)
-        .Inverse();
-  };
-  const Rigid3d f0 = at({0, 0, 0}, 0.0), f1 = at({0.05, 0, 1.0}, 1.5),
-                f2 = at({0.12, -0.02, 2.0}, 3.0);
+  const Rigid3d f0 = CamFromWorld({0, 0, 0}, 0.0, 0.0), f1 = CamFromWorld({0.05, 0, 1.0}, 1.5, 0.0),
+                f2 = CamFromWorld({0.12, -0.02, 2.0}, 3.0, 0.0);
   const SyntheticPair s1 = MakePair(f0, f1, 0, noise1, scene);
   const SyntheticPair s2 = MakePair(f1, f2, 1, noise2, scene);
   PlaneExtractionOptions options;

@@ -60,7 +60,7 @@ PairPlaneEvaluation EvaluatePlanes(const AnchorPair& pair,
         return ((plane.H_earlier_from_later * x).hnormalized() - (true_h(id) * x).hnormalized())
                    .norm() <= options.max_transfer_px;
       };
-      int l = labels[c.mb_index];
+      const int l = labels[c.mb_index];
       if (l == kMbMixed) {
         // A block on the seam of surfaces that all move as H (flush facades)
         // is on "the wall" like a definite block: its samples on such planes
