@@ -12,6 +12,7 @@
 #include "client/cli/commands.h"
 #include "client/cli/flags.h"
 #include "client/lib/client.h"
+#include "client/lib/results.h"
 #include "core/common/intrinsics_io.h"
 #include "server/server.h"
 
@@ -198,13 +199,7 @@ int RunCreate(int argc, char** argv) {
   } else {
     request.mutable_upload();
   }
-  v1::Intrinsics* pk = request.mutable_intrinsics();
-  pk->set_fx_px(k->fx_px);
-  pk->set_fy_px(k->fy_px);
-  pk->set_cx_px(k->cx_px);
-  pk->set_cy_px(k->cy_px);
-  pk->set_width_px(k->width_px);
-  pk->set_height_px(k->height_px);
+  *request.mutable_intrinsics() = client::IntrinsicsToProto(*k);
   v1::PipelineOptions* po = request.mutable_pipeline_options();
   auto eps = flags.GetDouble("eps-h", 0, 100);
   if (!eps.ok()) return Fail("create", eps.status().message(), 2);
