@@ -35,8 +35,8 @@ using Clock = std::chrono::steady_clock;
 
 // tests/rtsp_server.py serving `file` on 127.0.0.1:`port` (0: a free one).
 // The constructor waits for its "READY <url>" line; the destructor kills
-// (SIGKILL) and reaps it.
-class RtspServerProcess {
+// (SIGKILL) and reaps it (testing::ChildProcess).
+class RtspServerProcess : public testing::ChildProcess {
  public:
   RtspServerProcess(const std::string& file, int port) {
     int out[2];
@@ -72,26 +72,11 @@ class RtspServerProcess {
       port_ = std::atoi(url_.c_str() + url_.rfind(':') + 1);
     }
   }
-  ~RtspServerProcess() { Kill(); }
-  RtspServerProcess(const RtspServerProcess&) = delete;
-  RtspServerProcess& operator=(const RtspServerProcess&) = delete;
-
   // "rtsp://127.0.0.1:PORT/drive", empty if the server did not come up.
   const std::string& url() const { return url_; }
   int port() const { return port_; }
-  // SIGSTOP: its connections stay open, nothing is sent.
-  void Freeze() {
-    if (pid_ > 0) kill(pid_, SIGSTOP);
-  }
-  void Kill() {
-    if (pid_ <= 0) return;
-    kill(pid_, SIGKILL);
-    waitpid(pid_, nullptr, 0);
-    pid_ = -1;
-  }
 
  private:
-  pid_t pid_ = -1;
   std::string url_;
   int port_ = 0;
 };

@@ -47,9 +47,9 @@ ClientOptions TestClientOptions() {
   return o;
 }
 
-// A child `ffmpeg` (the camera) run with -nostdin -loglevel error. The
-// destructor kills (SIGKILL) and reaps it, so no test path leaks a process.
-class FfmpegProcess {
+// A child `ffmpeg` (the camera) run with -nostdin -loglevel error, killed
+// and reaped with the test (testing::ChildProcess).
+class FfmpegProcess : public testing::ChildProcess {
  public:
   explicit FfmpegProcess(const std::vector<std::string>& args) {
     std::vector<std::string> argv = {"ffmpeg", "-nostdin", "-loglevel", "error"};
@@ -66,39 +66,6 @@ class FfmpegProcess {
       _exit(127);
     }
   }
-  ~FfmpegProcess() { Kill(); }
-  FfmpegProcess(const FfmpegProcess&) = delete;
-  FfmpegProcess& operator=(const FfmpegProcess&) = delete;
-
-  bool started() const { return pid_ > 0; }
-  // The exit code once it exits within `timeout`; -1 if it is still running
-  // (or died by a signal).
-  int Wait(std::chrono::milliseconds timeout) {
-    const auto deadline = std::chrono::steady_clock::now() + timeout;
-    while (pid_ > 0) {
-      int status = 0;
-      if (waitpid(pid_, &status, WNOHANG) == pid_) {
-        pid_ = -1;
-        return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-      }
-      if (std::chrono::steady_clock::now() > deadline) return -1;
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    }
-    return -1;
-  }
-  // Freezes the process (SIGSTOP): its connections stay open, nothing is sent.
-  void Freeze() {
-    if (pid_ > 0) kill(pid_, SIGSTOP);
-  }
-  void Kill() {
-    if (pid_ <= 0) return;
-    kill(pid_, SIGKILL);
-    waitpid(pid_, nullptr, 0);
-    pid_ = -1;
-  }
-
- private:
-  pid_t pid_ = -1;
 };
 
 // True once a local socket of `kind` ("tcp" in LISTEN, or "udp") has `port`,

@@ -1,6 +1,9 @@
 // Streams with known content, made at test time by the real encoders.
 #pragma once
 
+#include <sys/types.h>
+
+#include <chrono>
 #include <string>
 
 #include <opencv2/core.hpp>
@@ -47,5 +50,27 @@ void WriteFileBytes(const std::string& path, const std::string& bytes);
 
 // Runs a shell command, returns its exit code.
 int RunCommand(const std::string& cmd);
+
+// A forked child process (a camera, an RTSP server) that a test owns: the
+// subclass forks and sets pid_; Kill() and the destructor kill it (SIGKILL)
+// and reap it, so no test path leaks a process.
+class ChildProcess {
+ public:
+  ChildProcess() = default;
+  ~ChildProcess() { Kill(); }
+  ChildProcess(const ChildProcess&) = delete;
+  ChildProcess& operator=(const ChildProcess&) = delete;
+
+  bool started() const { return pid_ > 0; }
+  // The exit code once it exits within `timeout`; -1 if it is still running
+  // (or died by a signal).
+  int Wait(std::chrono::milliseconds timeout);
+  // Freezes the process (SIGSTOP): its connections stay open, nothing is sent.
+  void Freeze();
+  void Kill();
+
+ protected:
+  pid_t pid_ = -1;
+};
 
 }  // namespace slapse::testing
