@@ -14,6 +14,13 @@
 namespace slapse {
 namespace {
 
+constexpr double kRadToDeg = 180.0 / M_PI;
+
+// The angle between two nonzero vectors, degrees.
+double AngleDeg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+  return kRadToDeg * std::acos(std::clamp(a.normalized().dot(b.normalized()), -1.0, 1.0));
+}
+
 double MsSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
@@ -217,17 +224,14 @@ StatusOr<ExtractionStats> EvaluateExtraction(const std::string& drive_dir,
       if (inf->has_motion) {
         const Rigid3d true_lfe = gt->frames[pair->later_index].world_from_cam.Inverse() *
                                  gt->frames[pair->earlier_index].world_from_cam;
-        constexpr double kDeg = 180.0 / M_PI;
-        rot_err_deg = kDeg * LogSO3(inf->later_from_earlier.R() * true_lfe.R().transpose()).norm();
-        const double c =
-            inf->later_from_earlier.translation.normalized().dot(true_lfe.translation.normalized());
-        dir_err_deg = kDeg * std::acos(std::clamp(c, -1.0, 1.0));
+        rot_err_deg =
+            kRadToDeg * LogSO3(inf->later_from_earlier.R() * true_lfe.R().transpose()).norm();
+        dir_err_deg = AngleDeg(inf->later_from_earlier.translation, true_lfe.translation);
       }
       // The extractor's learnt vertical against the true one (later camera frame).
       const Eigen::Vector3d true_down =
           gt->frames[pair->later_index].world_from_cam.R().transpose() * Eigen::Vector3d(0, 0, -1);
-      const double vertical_err_deg =
-          180.0 / M_PI * std::acos(std::clamp(extractor.vertical_down().dot(true_down), -1.0, 1.0));
+      const double vertical_err_deg = AngleDeg(extractor.vertical_down(), true_down);
       for (size_t k = 0; k < ev.matches.size(); ++k) {
         const PlaneMatch& m = ev.matches[k];
         const ExtractedPlane& p = extraction->planes[k];
