@@ -8,6 +8,7 @@
 #include <optional>
 
 #include "core/common/so3.h"
+#include "core/common/timing.h"
 #include "core/estimators/epipolar_plane.h"
 #include "core/mv/mv_reader.h"
 
@@ -19,10 +20,6 @@ constexpr double kRadToDeg = 180.0 / M_PI;
 // The angle between two nonzero vectors, degrees.
 double AngleDeg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
   return kRadToDeg * std::acos(std::clamp(a.normalized().dot(b.normalized()), -1.0, 1.0));
-}
-
-double MsSince(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 
 // The video of a drive directory: meta.json names it; default drive.ts.

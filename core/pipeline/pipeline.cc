@@ -3,12 +3,10 @@
 #include <chrono>
 #include <cmath>
 
+#include "core/common/timing.h"
+
 namespace slapse {
 namespace {
-
-double MsSince(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-}
 
 constexpr size_t kMaxSupportPointsPerPlane = 4000;
 
@@ -94,7 +92,7 @@ PipelineStep Pipeline::Process(const AnchorPair& pair) {
       Rigid3d prev_from_cur = inf->later_from_earlier.Inverse();
       const ScaleOptions& sc = options_.scale;
       double length = 1.0;  // up to scale, or the last step's length on re-initialisation
-      if (!trajectory_.empty() && trajectory_.size() >= 2) {
+      if (trajectory_.size() >= 2) {
         const auto& a = trajectory_[trajectory_.size() - 2].world_from_cam.translation;
         const auto& b = trajectory_.back().world_from_cam.translation;
         length = std::max((b - a).norm(), 1e-6);

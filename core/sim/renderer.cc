@@ -10,6 +10,7 @@
 #include <Eigen/LU>
 #include <opencv2/imgproc.hpp>
 
+#include "core/common/timing.h"
 #include "core/sim/texture.h"
 
 namespace slapse {
@@ -24,9 +25,6 @@ constexpr float kLevelScale[kMaxLevels] = {
     1.0f, 0.5f, 0.25f, 0.125f, 0.0625f, 0.03125f, 0.015625f, 0.0078125f, 0.00390625f, 0.001953125f};
 
 using Clock = std::chrono::steady_clock;
-double Seconds(Clock::time_point a, Clock::time_point b) {
-  return std::chrono::duration<double>(b - a).count();
-}
 
 // Keeps the part of a convex polygon where dot(n, p) + c >= 0.
 template <typename V, typename F>
@@ -391,7 +389,7 @@ Status Renderer::Render(const Rigid3d& world_from_cam, RenderedFrame* frame) {
   std::sort(todo.begin(), todo.end());
   MakeTiles(todo);
   const auto t_tex_done = Clock::now();
-  stats_.texture_s += Seconds(t_tex, t_tex_done);
+  stats_.texture_s += SecondsBetween(t_tex, t_tex_done);
   ++stats_.frames;
   for (Visible& vis : visible) {
     Tile* tile = tiles_.at(vis.piece->key).get();
@@ -602,7 +600,7 @@ Status Renderer::Render(const Rigid3d& world_from_cam, RenderedFrame* frame) {
     }
   }
   stats_.cached_tiles = tiles_.size();
-  stats_.draw_s += Seconds(t_start, Clock::now()) - Seconds(t_tex, t_tex_done);
+  stats_.draw_s += SecondsBetween(t_start, Clock::now()) - SecondsBetween(t_tex, t_tex_done);
   return Status::Ok();
 }
 

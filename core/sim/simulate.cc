@@ -6,6 +6,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "core/common/timing.h"
 #include "core/sim/ground_truth.h"
 
 namespace slapse {
@@ -13,9 +14,6 @@ namespace slapse {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double Seconds(Clock::time_point a, Clock::time_point b) {
-  return std::chrono::duration<double>(b - a).count();
-}
 
 std::string Num(double v) {
   char buf[40];
@@ -75,8 +73,8 @@ Status SimulateDrive(const SimulateOptions& o, SimulateReport* report) {
     const auto t1 = Clock::now();
     SLAPSE_RETURN_IF_ERROR(encoder.Write(frame.bgr));
     const auto t2 = Clock::now();
-    report->render_s += Seconds(t0, t1);
-    report->encode_s += Seconds(t1, t2);
+    report->render_s += SecondsBetween(t0, t1);
+    report->encode_s += SecondsBetween(t1, t2);
     GtFrame f;
     f.timestamp_s = drive.path.timestamps_s[i];
     f.world_from_cam = drive.path.world_from_cam[i];
@@ -88,7 +86,7 @@ Status SimulateDrive(const SimulateOptions& o, SimulateReport* report) {
   }
   const auto t3 = Clock::now();
   SLAPSE_RETURN_IF_ERROR(encoder.Finish());
-  report->encode_s += Seconds(t3, Clock::now());
+  report->encode_s += SecondsBetween(t3, Clock::now());
   SLAPSE_RETURN_IF_ERROR(SaveGroundTruth(gt, o.output_dir));
 
   report->frames = static_cast<int>(n);
