@@ -8,7 +8,11 @@
 // Camera frame: x right, y down, z forward along the optical axis.
 #pragma once
 
+#include <string>
+
 #include <Eigen/Core>
+
+#include "core/common/status.h"
 
 namespace slapse {
 
@@ -33,5 +37,10 @@ struct Intrinsics {
   // A centred camera with the given horizontal field of view.
   static Intrinsics FromHorizontalFov(int width_px, int height_px, double hfov_deg);
 };
+
+// The one check of intrinsics a user or a client gave: focal lengths finite
+// and > 0, principal point finite, width/height >= 0 (0 = take the stream's).
+// `what` names the source in the message (e.g. "intrinsics file 'k.json'").
+Status ValidateIntrinsics(const Intrinsics& k, const std::string& what = "intrinsics");
 
 }  // namespace slapse
