@@ -318,8 +318,10 @@ TEST_F(RtspPullTest, ReconnectsWhenTheServerComesBackThenGivesUp) {
   EXPECT_GE(reconnects, 1);
 
   // Gone for good: 4 more retries (300 + 600 + 1000 + 1000 ms), then FAILED.
-  camera->Kill();
+  // The clock starts before the kill: the server may see the connection close
+  // (and start its first 300 ms wait) while Kill() is still reaping the process.
   const auto t_kill = Clock::now();
+  camera->Kill();
   watcher.join();  // bounded by the client's watch deadline
   const auto elapsed = Clock::now() - t_kill;
   ASSERT_TRUE(watch_end.ok()) << watch_end.ToString();
