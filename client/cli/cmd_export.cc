@@ -68,7 +68,7 @@ int RunExport(int argc, char** argv) {
     plane_map = std::move(*got);
   }
 
-  const std::vector<Pipeline::TrajectoryPoint> traj = api::TrajectoryFromProto(*trajectory);
+  const auto traj = api::TrajectoryFromProto(*trajectory);  // as Pipeline::trajectory()
   auto write = [&](std::ostream& os) {
     if (format == "tum") {
       WriteTrajectoryTum(traj, os);
