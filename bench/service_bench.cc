@@ -43,8 +43,8 @@ extern "C" {
 #include <libavutil/log.h>
 }
 
+#include "api/convert.h"
 #include "client/lib/client.h"
-#include "client/lib/results.h"
 #include "core/common/intrinsics_io.h"
 #include "core/sim/simulate.h"
 #include "server/server.h"
@@ -131,7 +131,7 @@ int RunChild(int n, const std::string& video, const slapse::Intrinsics& k, doubl
     v1::Session req;
     req.mutable_rtsp_push()->set_path("cam" + std::to_string(i));
     req.mutable_rtsp_push()->set_start_timeout_ms(30000);
-    *req.mutable_intrinsics() = slapse::client::IntrinsicsToProto(k);
+    *req.mutable_intrinsics() = slapse::api::IntrinsicsToProto(k);
     auto s = client->CreateSession(req);
     if (!s.ok()) {
       std::fprintf(stderr, "service_bench: create: %s\n", s.status().ToString().c_str());

@@ -9,22 +9,17 @@
 // Thread-safety: every public method may be called from any thread.
 #pragma once
 
-#include <atomic>
-#include <condition_variable>
 #include <cstdint>
-#include <deque>
 #include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
 #include <string>
-#include <thread>
-#include <vector>
 
 #include "core/common/status.h"
-#include "core/mv/mv_reader.h"
 #include "server/event_log.h"
-#include "server/upload_queue.h"
+#include "server/session.h"
+#include "server/worker_pool.h"
 #include "slapse/v1/slapse.pb.h"
 
 namespace slapse::server {
@@ -82,28 +77,16 @@ class SessionManager {
   void Shutdown();
 
  private:
-  struct Session;
-
   // INVALID_ARGUMENT for a malformed name, NOT_FOUND for an unknown one.
   StatusOr<std::shared_ptr<Session>> Find(const std::string& name) const;
-  void WorkerLoop();
-  void RunSession(const std::shared_ptr<Session>& session);
-  // Opens the session's reader for its source (RTSP pull: one connection
-  // attempt); `interrupt` aborts blocking I/O.
-  StatusOr<std::unique_ptr<MvReader>> OpenReader(const std::shared_ptr<Session>& session,
-                                                 std::function<bool()> interrupt);
   int ActiveCountLocked() const;
-  // Stops a session (sets its flag, closes its upload, marks it STOPPED).
-  static void StopSession(Session* session, const std::string& why);
 
   const SessionManagerOptions options_;
   mutable std::mutex mu_;
-  std::condition_variable work_ready_;
   std::map<uint64_t, std::shared_ptr<Session>> sessions_;  // by id = creation order
-  std::deque<std::shared_ptr<Session>> queue_;             // waiting for a worker
-  std::vector<std::thread> workers_;
   uint64_t next_id_ = 1;
   bool shutting_down_ = false;
+  WorkerPool pool_;  // one thread per active session; last, so it stops first
 };
 
 }  // namespace slapse::server

@@ -492,8 +492,8 @@ TEST_F(RtspPullTest, BadUrlOrPolicyIsInvalidArgument) {
                                 "rtsps://u:p@127.0.0.1:1/a?b=c", "rtsp://[::1]:1/x"}) {
     auto created = client_->CreateSession(PullRequest(url));
     EXPECT_TRUE(created.ok()) << url << ": " << created.status().ToString();
-    if (created.ok()) EXPECT_EQ(created->rtsp_pull().url(), url);
     if (created.ok()) {
+      EXPECT_EQ(created->rtsp_pull().url(), url);
       Status end;
       WatchAll(created->name(), &end);  // let the session end: the server has 2 slots
       EXPECT_TRUE(end.ok()) << end.ToString();
@@ -519,7 +519,7 @@ TEST_F(RtspPullTest, PipelineBreakContinuesTheTrajectoryFromTheLastPose) {
   for (size_t i = 0; i < cut; ++i) ASSERT_TRUE(pipeline.Push(frames[i]).ok());
   const size_t n_before = pipeline.trajectory().size();
   ASSERT_GE(n_before, 3u);
-  const Pipeline::TrajectoryPoint last = pipeline.trajectory().back();
+  const auto last = pipeline.trajectory().back();
 
   pipeline.Break();
   // The "new connection" starts over at the drive's first frame.

@@ -344,10 +344,10 @@ TEST_F(ServerTest, RtpSdpStreamsPosesUntilTheReceiveTimeout) {
 
 TEST_F(ServerTest, BadNetworkSourcesAreInvalidArgument) {
   v1::Session request = UploadRequest();
-  for (const std::string sdp : {std::string(), std::string("hello"),
-                                std::string("v=0\nc=IN IP4 127.0.0.1\nm=audio 5004 RTP/AVP 0\n"),
-                                std::string("v=0\nm=video 5004 RTP/AVP 32\n"),
-                                std::string("v=0\nc=IN IP4 127.0.0.1\nm=video x RTP/AVP 32\n")}) {
+  for (const std::string& sdp : {std::string(), std::string("hello"),
+                                 std::string("v=0\nc=IN IP4 127.0.0.1\nm=audio 5004 RTP/AVP 0\n"),
+                                 std::string("v=0\nm=video 5004 RTP/AVP 32\n"),
+                                 std::string("v=0\nc=IN IP4 127.0.0.1\nm=video x RTP/AVP 32\n")}) {
     request.mutable_rtp_sdp()->set_sdp(sdp);
     EXPECT_EQ(client_->CreateSession(request).status().code(), StatusCode::kInvalidArgument) << sdp;
   }

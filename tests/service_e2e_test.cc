@@ -13,8 +13,8 @@
 #include <thread>
 #include <vector>
 
+#include "api/convert.h"
 #include "client/lib/client.h"
-#include "client/lib/results.h"
 #include "core/mv/mv_reader.h"
 #include "core/pipeline/pipeline.h"
 #include "core/pipeline/result_io.h"
@@ -30,7 +30,7 @@ using server::SlapseServer;
 // What `slapse run` computes for a file, with a session's default options.
 struct OfflineResult {
   int64_t frames = 0;
-  std::vector<Pipeline::TrajectoryPoint> trajectory;
+  std::vector<api::TrajectoryPoint> trajectory;
   std::map<int, MapPlane> planes;
   bool metric = false;
 };
@@ -70,7 +70,7 @@ struct ServedResult {
 void Serve(SlapseClient& client, const testing::TestDrive& drive, ServedResult* out) {
   v1::Session request;
   request.mutable_upload();
-  *request.mutable_intrinsics() = client::IntrinsicsToProto(drive.intrinsics);
+  *request.mutable_intrinsics() = api::IntrinsicsToProto(drive.intrinsics);
   auto created = client.CreateSession(request);
   ASSERT_TRUE(created.ok()) << created.status().ToString();
   const std::string name = created->name();
@@ -117,7 +117,7 @@ void ExpectSameResults(const OfflineResult& offline, const ServedResult& served)
   EXPECT_EQ(served.trajectory.metric(), offline.metric);
   ASSERT_EQ(served.trajectory.points_size(), static_cast<int>(offline.trajectory.size()));
   for (size_t i = 0; i < offline.trajectory.size(); ++i) {
-    const Pipeline::TrajectoryPoint& o = offline.trajectory[i];
+    const api::TrajectoryPoint& o = offline.trajectory[i];
     const v1::Trajectory::Point& s = served.trajectory.points(static_cast<int>(i));
     const v1::Pose& p = s.world_from_cam();
     SCOPED_TRACE("pose " + std::to_string(i));
@@ -149,7 +149,7 @@ void ExpectSameResults(const OfflineResult& offline, const ServedResult& served)
 
   // `slapse export` writes the served results with the run's writers: the
   // files are byte for byte those of `slapse run`.
-  const auto served_traj = client::TrajectoryFromProto(served.trajectory);
+  const auto served_traj = api::TrajectoryFromProto(served.trajectory);
   EXPECT_EQ(Written([&](std::ostream& o) { WriteTrajectoryTum(served_traj, o); }),
             Written([&](std::ostream& o) { WriteTrajectoryTum(offline.trajectory, o); }));
   EXPECT_EQ(Written([&](std::ostream& o) { WriteTrajectoryKitti(served_traj, o); }),
@@ -158,8 +158,8 @@ void ExpectSameResults(const OfflineResult& offline, const ServedResult& served)
   json.seen_at_frames = false;  // not kept by a server
   EXPECT_EQ(
       Written([&](std::ostream& o) {
-        WriteResultJson(client::PlaneMapFromProto(served.plane_map), served.plane_map.metric(),
-                        json, o);
+        WriteResultJson(api::PlaneMapFromProto(served.plane_map), served.plane_map.metric(), json,
+                        o);
       }),
       Written([&](std::ostream& o) { WriteResultJson(offline.planes, offline.metric, json, o); }));
 }

@@ -8,7 +8,7 @@
 #include "client/cli/commands.h"
 #include "client/cli/flags.h"
 #include "client/lib/client.h"
-#include "client/lib/results.h"
+#include "api/convert.h"
 #include "core/pipeline/result_io.h"
 
 namespace slapse::cli {
@@ -68,7 +68,7 @@ int RunExport(int argc, char** argv) {
     plane_map = std::move(*got);
   }
 
-  const std::vector<Pipeline::TrajectoryPoint> traj = client::TrajectoryFromProto(*trajectory);
+  const auto traj = api::TrajectoryFromProto(*trajectory);  // as Pipeline::trajectory()
   auto write = [&](std::ostream& os) {
     if (format == "tum") {
       WriteTrajectoryTum(traj, os);
@@ -78,7 +78,7 @@ int RunExport(int argc, char** argv) {
       ResultJsonOptions o;
       o.seen_at_frames = false;  // a server's plane map does not keep them
       o.trajectory = &traj;
-      WriteResultJson(client::PlaneMapFromProto(plane_map), trajectory->metric(), o, os);
+      WriteResultJson(api::PlaneMapFromProto(plane_map), trajectory->metric(), o, os);
     }
   };
   if (out == "-") {

@@ -12,7 +12,7 @@
 #include "client/cli/commands.h"
 #include "client/cli/flags.h"
 #include "client/lib/client.h"
-#include "client/lib/results.h"
+#include "api/convert.h"
 #include "core/common/intrinsics_io.h"
 #include "server/server.h"
 
@@ -199,7 +199,7 @@ int RunCreate(int argc, char** argv) {
   } else {
     request.mutable_upload();
   }
-  *request.mutable_intrinsics() = client::IntrinsicsToProto(*k);
+  *request.mutable_intrinsics() = api::IntrinsicsToProto(*k);
   v1::PipelineOptions* po = request.mutable_pipeline_options();
   auto eps = flags.GetDouble("eps-h", 0, 100);
   if (!eps.ok()) return Fail("create", eps.status().message(), 2);

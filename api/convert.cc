@@ -1,0 +1,180 @@
+#include "api/convert.h"
+
+namespace slapse::api {
+
+v1::Intrinsics IntrinsicsToProto(const Intrinsics& k) {
+  v1::Intrinsics out;
+  out.set_fx_px(k.fx_px);
+  out.set_fy_px(k.fy_px);
+  out.set_cx_px(k.cx_px);
+  out.set_cy_px(k.cy_px);
+  out.set_width_px(k.width_px);
+  out.set_height_px(k.height_px);
+  return out;
+}
+
+Intrinsics IntrinsicsFromProto(const v1::Intrinsics& k) {
+  Intrinsics out;
+  out.fx_px = k.fx_px();
+  out.fy_px = k.fy_px();
+  out.cx_px = k.cx_px();
+  out.cy_px = k.cy_px();
+  out.width_px = k.width_px();
+  out.height_px = k.height_px();
+  return out;
+}
+
+v1::Pose PoseToProto(const Rigid3d& t) {
+  v1::Pose out;
+  out.set_tx(t.translation.x());
+  out.set_ty(t.translation.y());
+  out.set_tz(t.translation.z());
+  out.set_qx(t.rotation.x());
+  out.set_qy(t.rotation.y());
+  out.set_qz(t.rotation.z());
+  out.set_qw(t.rotation.w());
+  return out;
+}
+
+Rigid3d PoseFromProto(const v1::Pose& q) {
+  return Rigid3d(Eigen::Quaterniond(q.qw(), q.qx(), q.qy(), q.qz()),
+                 Eigen::Vector3d(q.tx(), q.ty(), q.tz()));
+}
+
+v1::Vec3 Vec3ToProto(const Eigen::Vector3d& v) {
+  v1::Vec3 out;
+  out.set_x(v.x());
+  out.set_y(v.y());
+  out.set_z(v.z());
+  return out;
+}
+
+Eigen::Vector3d Vec3FromProto(const v1::Vec3& v) { return Eigen::Vector3d(v.x(), v.y(), v.z()); }
+
+v1::PipelineOptions::ScaleSource ScaleSourceToProto(ScaleOptions::Source source) {
+  switch (source) {
+    case ScaleOptions::Source::kFirstStep:
+      return v1::PipelineOptions::FIRST_STEP;
+    case ScaleOptions::Source::kSpeed:
+      return v1::PipelineOptions::SPEED;
+    case ScaleOptions::Source::kCameraHeight:
+      return v1::PipelineOptions::CAMERA_HEIGHT;
+    case ScaleOptions::Source::kUpToScale:
+      break;
+  }
+  return v1::PipelineOptions::UP_TO_SCALE;
+}
+
+ScaleOptions::Source ScaleSourceFromProto(v1::PipelineOptions::ScaleSource source) {
+  switch (source) {
+    case v1::PipelineOptions::FIRST_STEP:
+      return ScaleOptions::Source::kFirstStep;
+    case v1::PipelineOptions::SPEED:
+      return ScaleOptions::Source::kSpeed;
+    case v1::PipelineOptions::CAMERA_HEIGHT:
+      return ScaleOptions::Source::kCameraHeight;
+    default:
+      return ScaleOptions::Source::kUpToScale;
+  }
+}
+
+v1::PipelineOptions PipelineOptionsToProto(const PipelineOptions& o) {
+  v1::PipelineOptions out;
+  out.set_eps_h_px(o.extraction.eps_h_px);
+  out.set_scale_source(ScaleSourceToProto(o.scale.source));
+  switch (o.scale.source) {
+    case ScaleOptions::Source::kFirstStep:
+      out.set_first_step_m(o.scale.first_step_m);
+      break;
+    case ScaleOptions::Source::kSpeed:
+      out.set_speed_mps(o.scale.speed_mps);
+      break;
+    case ScaleOptions::Source::kCameraHeight:
+      out.set_camera_height_m(o.scale.camera_height_m);
+      break;
+    case ScaleOptions::Source::kUpToScale:
+      break;
+  }
+  return out;
+}
+
+PipelineOptions PipelineOptionsFromProto(const v1::PipelineOptions& p) {
+  PipelineOptions o;
+  // 0 = the default: PlaneExtractionOptions' own.
+  if (p.eps_h_px() > 0) o.extraction.eps_h_px = p.eps_h_px();
+  o.scale.source = ScaleSourceFromProto(p.scale_source());
+  switch (o.scale.source) {
+    case ScaleOptions::Source::kFirstStep:
+      o.scale.first_step_m = p.first_step_m();
+      break;
+    case ScaleOptions::Source::kSpeed:
+      o.scale.speed_mps = p.speed_mps();
+      break;
+    case ScaleOptions::Source::kCameraHeight:
+      o.scale.camera_height_m = p.camera_height_m();
+      break;
+    case ScaleOptions::Source::kUpToScale:
+      break;
+  }
+  return o;
+}
+
+v1::Trajectory::Point TrajectoryPointToProto(const TimedPose& point) {
+  v1::Trajectory::Point out;
+  out.set_anchor_index(point.index);
+  out.set_timestamp_s(point.timestamp_s);
+  *out.mutable_world_from_cam() = PoseToProto(point.world_from_cam);
+  return out;
+}
+
+TimedPose TimedPoseFromProto(const v1::Trajectory::Point& point) {
+  TimedPose out;
+  out.index = point.anchor_index();
+  out.timestamp_s = point.timestamp_s();
+  out.world_from_cam = PoseFromProto(point.world_from_cam());
+  return out;
+}
+
+std::vector<TrajectoryPoint> TrajectoryFromProto(const v1::Trajectory& trajectory) {
+  std::vector<TrajectoryPoint> out;
+  out.reserve(trajectory.points_size());
+  for (const v1::Trajectory::Point& p : trajectory.points()) {
+    const TimedPose pose = TimedPoseFromProto(p);
+    TrajectoryPoint point{};
+    point.index = pose.index;
+    point.timestamp_s = pose.timestamp_s;
+    point.world_from_cam = pose.world_from_cam;
+    out.push_back(point);
+  }
+  return out;
+}
+
+v1::PlaneMap::Plane MapPlaneToProto(const MapPlane& p) {
+  v1::PlaneMap::Plane out;
+  out.set_track_id(p.track_id);
+  *out.mutable_normal_world() = Vec3ToProto(p.normal_world);
+  out.set_distance(p.distance_m);
+  out.set_first_seen_s(p.first_seen_s);
+  out.set_last_seen_s(p.last_seen_s);
+  out.set_observations(p.observations);
+  return out;
+}
+
+MapPlane MapPlaneFromProto(const v1::PlaneMap::Plane& p) {
+  MapPlane out;
+  out.track_id = p.track_id();
+  out.normal_world = Vec3FromProto(p.normal_world());
+  out.distance_m = p.distance();
+  out.first_seen_s = p.first_seen_s();
+  out.last_seen_s = p.last_seen_s();
+  out.observations = p.observations();
+  return out;
+}
+
+std::map<int, MapPlane> PlaneMapFromProto(const v1::PlaneMap& plane_map) {
+  std::map<int, MapPlane> out;
+  for (const v1::PlaneMap::Plane& p : plane_map.planes()) out[p.track_id()] = MapPlaneFromProto(p);
+  return out;
+}
+
+}  // namespace slapse::api

@@ -1,0 +1,60 @@
+// Conversions between the service's wire messages (proto/slapse/v1) and the
+// core structs, both ways, in one place for the server, the client and the
+// CLI.
+//
+// Options: a core struct field the proto does not carry keeps the struct's
+// default; a proto "0 = default" field (eps_h_px) becomes the core struct's
+// default (PlaneExtractionOptions{}), never a retyped number. Of the scale
+// fields only the one the scale source uses travels; the others keep the
+// ScaleOptions defaults. Poses: Rigid3d <-> Pose (translation, unit
+// quaternion x, y, z, w), frames as in core/common/rigid3.h.
+#pragma once
+
+#include <map>
+#include <type_traits>
+#include <utility>
+#include <vector>
+
+#include "core/common/camera.h"
+#include "core/common/rigid3.h"
+#include "core/common/timed_pose.h"
+#include "core/pipeline/pipeline.h"
+#include "slapse/v1/slapse.pb.h"
+
+namespace slapse::api {
+
+// The element type of Pipeline::trajectory() (and so of the trajectory
+// writers in core/pipeline/result_io.h).
+using TrajectoryPoint =
+    std::decay_t<decltype(std::declval<const Pipeline&>().trajectory())>::value_type;
+
+// Camera (width_px / height_px 0: the stream's).
+v1::Intrinsics IntrinsicsToProto(const Intrinsics& k);
+Intrinsics IntrinsicsFromProto(const v1::Intrinsics& k);
+
+// Pose.
+v1::Pose PoseToProto(const Rigid3d& world_from_cam);
+Rigid3d PoseFromProto(const v1::Pose& pose);
+v1::Vec3 Vec3ToProto(const Eigen::Vector3d& v);
+Eigen::Vector3d Vec3FromProto(const v1::Vec3& v);
+
+// Pipeline options: eps_h_px and the scale source with its one parameter.
+v1::PipelineOptions PipelineOptionsToProto(const PipelineOptions& options);
+PipelineOptions PipelineOptionsFromProto(const v1::PipelineOptions& options);
+v1::PipelineOptions::ScaleSource ScaleSourceToProto(ScaleOptions::Source source);
+ScaleOptions::Source ScaleSourceFromProto(v1::PipelineOptions::ScaleSource source);
+
+// Trajectory: one point, and a GetTrajectory snapshot as
+// Pipeline::trajectory() holds it.
+v1::Trajectory::Point TrajectoryPointToProto(const TimedPose& point);
+TimedPose TimedPoseFromProto(const v1::Trajectory::Point& point);
+std::vector<TrajectoryPoint> TrajectoryFromProto(const v1::Trajectory& trajectory);
+
+// Plane map: one plane, and a GetPlaneMap snapshot by track id. The wire
+// carries neither seen_indices, pi_cam, mb_indices nor support_world (nor the
+// first / last seen indices): those stay empty / -1.
+v1::PlaneMap::Plane MapPlaneToProto(const MapPlane& plane);
+MapPlane MapPlaneFromProto(const v1::PlaneMap::Plane& plane);
+std::map<int, MapPlane> PlaneMapFromProto(const v1::PlaneMap& plane_map);
+
+}  // namespace slapse::api

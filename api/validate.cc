@@ -1,0 +1,225 @@
+#include "api/validate.h"
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdlib>
+
+#include "api/convert.h"
+#include "core/common/camera.h"
+
+namespace slapse::api {
+namespace {
+
+bool Finite(double v) { return std::isfinite(v); }
+
+}  // namespace
+
+Status ValidateSourceTimeouts(int start_ms, int receive_ms, const std::string& what) {
+  if (start_ms < 0 || receive_ms < 0) {
+    return InvalidArgumentError(what +
+                                ".start_timeout_ms and receive_timeout_ms must be >= 0 "
+                                "(0 = the default)");
+  }
+  return Status::Ok();
+}
+
+Status ValidateRtspPushPath(const std::string& path) {
+  bool ok = !path.empty() && path.size() <= 256 && path[0] != '/';
+  for (char c : path) {
+    ok = ok && (std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '_' || c == '-' ||
+                c == '/');
+  }
+  if (!ok) {
+    return InvalidArgumentError("rtsp_push.path '" + path +
+                                "' is not a path: 1 to 256 of [A-Za-z0-9._-/], no leading '/'");
+  }
+  return Status::Ok();
+}
+
+std::string RedactUrl(const std::string& url) {
+  const size_t scheme_end = url.find("://");
+  if (scheme_end == std::string::npos) return url;
+  const size_t auth = scheme_end + 3;
+  const size_t auth_end = std::min(url.find_first_of("/?#", auth), url.size());
+  const size_t at = url.rfind('@', auth_end == 0 ? 0 : auth_end - 1);
+  if (at == std::string::npos || at < auth) return url;
+  return url.substr(0, auth) + "***" + url.substr(at);
+}
+
+Status ValidateRtspUrl(const std::string& url) {
+  auto bad = [&](const std::string& why) {
+    return InvalidArgumentError("rtsp_pull.url '" + RedactUrl(url) + "' " + why +
+                                "; want rtsp://[user:password@]host[:port]/path or rtsps://...");
+  };
+  if (url.empty()) return InvalidArgumentError("rtsp_pull.url is required, e.g. rtsp://cam:554/1");
+  if (url.size() > kMaxRtspUrlChars) return bad("is longer than 2048 characters");
+  for (char c : url) {
+    if (static_cast<unsigned char>(c) <= 0x20 || c == 0x7f) {
+      return bad("contains a space or control character");
+    }
+  }
+  const size_t scheme_end = url.find("://");
+  std::string scheme = scheme_end == std::string::npos ? "" : url.substr(0, scheme_end);
+  for (char& c : scheme) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  if (scheme != "rtsp" && scheme != "rtsps") return bad("does not start with rtsp:// or rtsps://");
+  const size_t auth = scheme_end + 3;
+  const size_t auth_end = std::min(url.find_first_of("/?#", auth), url.size());
+  std::string hostport = url.substr(auth, auth_end - auth);
+  const size_t at = hostport.rfind('@');
+  if (at != std::string::npos) hostport = hostport.substr(at + 1);
+  std::string host, port;
+  if (!hostport.empty() && hostport[0] == '[') {
+    const size_t close = hostport.find(']');
+    if (close == std::string::npos) return bad("has an IPv6 host without its closing ']'");
+    host = hostport.substr(1, close - 1);
+    const std::string rest = hostport.substr(close + 1);
+    if (!rest.empty() && rest[0] != ':') return bad("has characters after the IPv6 host");
+    if (!rest.empty()) port = rest.substr(1);
+    for (char c : host) {
+      if (!std::isxdigit(static_cast<unsigned char>(c)) && c != ':' && c != '.') {
+        return bad("has an IPv6 host with characters other than hex digits, ':' and '.'");
+      }
+    }
+  } else {
+    const size_t colon = hostport.find(':');
+    host = hostport.substr(0, colon);
+    if (colon != std::string::npos) port = hostport.substr(colon + 1);
+    for (char c : host) {
+      if (!std::isalnum(static_cast<unsigned char>(c)) && c != '.' && c != '-' && c != '_') {
+        return bad("has a host with characters other than letters, digits, '.', '-' and '_'");
+      }
+    }
+  }
+  if (host.empty()) return bad("has no host");
+  if (!port.empty() || hostport.back() == ':') {
+    bool digits = !port.empty() && port.size() <= 5;
+    for (char c : port) digits = digits && std::isdigit(static_cast<unsigned char>(c));
+    const long n = digits ? std::strtol(port.c_str(), nullptr, 10) : 0;
+    if (n < 1 || n > 65535) return bad("has a port that is not 1..65535");
+  }
+  return Status::Ok();
+}
+
+Status ValidateReconnectPolicy(const v1::ReconnectPolicy& p) {
+  auto bad = [](const std::string& why) {
+    return InvalidArgumentError("rtsp_pull.reconnect." + why);
+  };
+  if (p.max_attempts() < 0 || p.max_attempts() > kMaxReconnectAttempts) {
+    return bad("max_attempts must be in [0, 1000000] (0 = no reconnect), got " +
+               std::to_string(p.max_attempts()));
+  }
+  if (p.initial_interval_ms() < 0 || p.initial_interval_ms() > kMaxReconnectIntervalMs) {
+    return bad("initial_interval_ms must be in [0, 3600000] ms (0 = 1000), got " +
+               std::to_string(p.initial_interval_ms()));
+  }
+  if (p.max_interval_ms() < 0 || p.max_interval_ms() > kMaxReconnectIntervalMs) {
+    return bad("max_interval_ms must be in [0, 3600000] ms (0 = 30000), got " +
+               std::to_string(p.max_interval_ms()));
+  }
+  const double m = p.backoff_multiplier();
+  if (!Finite(m) || (m != 0 && (m < 1 || m > 100))) {
+    return bad("backoff_multiplier must be in [1, 100] (0 = 2), got " + std::to_string(m));
+  }
+  if (p.max_interval_ms() > 0 && p.max_interval_ms() < p.initial_interval_ms()) {
+    return bad("max_interval_ms (" + std::to_string(p.max_interval_ms()) +
+               ") must be >= initial_interval_ms (" + std::to_string(p.initial_interval_ms()) +
+               ")");
+  }
+  return Status::Ok();
+}
+
+// A light syntax check (RFC 4566): "v=0" first, every line "<letter>=...",
+// a c= line and an m=video line with a port. FFmpeg's SDP parser accepts
+// almost anything, so this is what turns a malformed SDP into INVALID_ARGUMENT.
+Status ValidateSdp(const std::string& sdp) {
+  auto bad = [](const std::string& why) { return InvalidArgumentError("rtp_sdp.sdp: " + why); };
+  if (sdp.empty()) return bad("required (the session description text)");
+  if (sdp.size() > kMaxSdpBytes) return bad("longer than 64 KiB");
+  if (sdp.find('\0') != std::string::npos) return bad("contains a NUL byte");
+  bool first = true, has_c = false, has_video = false;
+  size_t pos = 0;
+  while (pos < sdp.size()) {
+    size_t eol = sdp.find('\n', pos);
+    if (eol == std::string::npos) eol = sdp.size();
+    std::string line = sdp.substr(pos, eol - pos);
+    pos = eol + 1;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (line.empty()) continue;
+    if (line.size() < 2 || line[1] != '=' || !std::islower(static_cast<unsigned char>(line[0]))) {
+      return bad("line '" + line.substr(0, 40) + "' is not '<letter>=<value>'");
+    }
+    if (first && line != "v=0") return bad("must start with 'v=0'");
+    first = false;
+    if (line[0] == 'c') has_c = true;
+    if (line.compare(0, 8, "m=video ") == 0) {
+      const long port = std::strtol(line.c_str() + 8, nullptr, 10);
+      if (port < 1 || port > 65535) return bad("m=video line without a port in 1..65535");
+      has_video = true;
+    }
+  }
+  if (!has_c) return bad("no connection line (c=IN IP4 <address>)");
+  if (!has_video) return bad("no video media line (m=video <port> RTP/AVP <type>)");
+  return Status::Ok();
+}
+
+Status ValidateSession(const v1::Session& r) {
+  switch (r.source_case()) {
+    case v1::Session::kUpload:
+      break;
+    case v1::Session::kRtspPull:
+      SLAPSE_RETURN_IF_ERROR(ValidateRtspUrl(r.rtsp_pull().url()));
+      SLAPSE_RETURN_IF_ERROR(ValidateReconnectPolicy(r.rtsp_pull().reconnect()));
+      SLAPSE_RETURN_IF_ERROR(ValidateSourceTimeouts(
+          r.rtsp_pull().start_timeout_ms(), r.rtsp_pull().receive_timeout_ms(), "rtsp_pull"));
+      break;
+    case v1::Session::kRtspPush:
+      SLAPSE_RETURN_IF_ERROR(ValidateRtspPushPath(r.rtsp_push().path()));
+      SLAPSE_RETURN_IF_ERROR(ValidateSourceTimeouts(
+          r.rtsp_push().start_timeout_ms(), r.rtsp_push().receive_timeout_ms(), "rtsp_push"));
+      break;
+    case v1::Session::kRtpSdp:
+      SLAPSE_RETURN_IF_ERROR(ValidateSdp(r.rtp_sdp().sdp()));
+      SLAPSE_RETURN_IF_ERROR(ValidateSourceTimeouts(r.rtp_sdp().start_timeout_ms(),
+                                                    r.rtp_sdp().receive_timeout_ms(), "rtp_sdp"));
+      break;
+    case v1::Session::SOURCE_NOT_SET:
+      return InvalidArgumentError(
+          "session.source is required (upload, rtsp_pull, rtsp_push, rtp_sdp)");
+  }
+  if (!r.has_intrinsics()) {
+    return InvalidArgumentError("session.intrinsics is required (fx_px, fy_px, cx_px, cy_px)");
+  }
+  SLAPSE_RETURN_IF_ERROR(ValidateIntrinsics(IntrinsicsFromProto(r.intrinsics()), "intrinsics"));
+  return ValidatePipelineOptions(r.pipeline_options());
+}
+
+Status ValidatePipelineOptions(const v1::PipelineOptions& p) {
+  if (!Finite(p.eps_h_px()) || p.eps_h_px() < 0 || p.eps_h_px() > kMaxEpsHPx) {
+    return InvalidArgumentError("pipeline_options.eps_h_px must be in [0, 100] px (0 = default)");
+  }
+  auto positive = [](double v) { return Finite(v) && v > 0; };
+  switch (p.scale_source()) {
+    case v1::PipelineOptions::FIRST_STEP:
+      if (!positive(p.first_step_m())) {
+        return InvalidArgumentError("pipeline_options.first_step_m must be > 0 for FIRST_STEP");
+      }
+      break;
+    case v1::PipelineOptions::SPEED:
+      if (!positive(p.speed_mps())) {
+        return InvalidArgumentError("pipeline_options.speed_mps must be > 0 for SPEED");
+      }
+      break;
+    case v1::PipelineOptions::CAMERA_HEIGHT:
+      if (!positive(p.camera_height_m())) {
+        return InvalidArgumentError(
+            "pipeline_options.camera_height_m must be > 0 for CAMERA_HEIGHT");
+      }
+      break;
+    default:
+      break;
+  }
+  return Status::Ok();
+}
+
+}  // namespace slapse::api

@@ -1,0 +1,53 @@
+// The checks of a CreateSession request, shared by the server (which must
+// refuse a bad request) and a client (which may check before it sends), and
+// the defaults that a request's "0 = default" source fields stand for.
+//
+// Every check returns INVALID_ARGUMENT with a message that names the field
+// and what it wants; the intrinsics go through core's ValidateIntrinsics.
+#pragma once
+
+#include <cstddef>
+#include <string>
+
+#include "core/common/status.h"
+#include "slapse/v1/slapse.pb.h"
+
+namespace slapse::api {
+
+// Network sources (RtspPull / RtspPush / RtpSdp): start_timeout_ms and
+// receive_timeout_ms when the request has 0, and the largest SDP accepted.
+constexpr int kDefaultStartTimeoutMs = 60000;
+constexpr int kDefaultReceiveTimeoutMs = 5000;
+constexpr size_t kMaxSdpBytes = 64 << 10;
+// RTSP pull: ReconnectPolicy defaults (0 in the request) and bounds.
+constexpr int kDefaultReconnectIntervalMs = 1000;
+constexpr double kDefaultBackoffMultiplier = 2.0;
+constexpr int kDefaultMaxReconnectIntervalMs = 30000;
+constexpr int kMaxReconnectAttempts = 1000000;
+constexpr int kMaxReconnectIntervalMs = 3600000;
+constexpr size_t kMaxRtspUrlChars = 2048;
+// PipelineOptions.eps_h_px: the largest accepted, px.
+constexpr double kMaxEpsHPx = 100.0;
+
+// The whole request: a source and its fields, the intrinsics and the
+// pipeline options.
+Status ValidateSession(const v1::Session& request);
+
+// The parts.
+Status ValidateSourceTimeouts(int start_timeout_ms, int receive_timeout_ms,
+                              const std::string& what);
+// rtsp:// or rtsps:// with a host (a name, an IPv4 address or a bracketed
+// IPv6 address) and an optional port; no spaces or control characters.
+Status ValidateRtspUrl(const std::string& url);
+Status ValidateReconnectPolicy(const v1::ReconnectPolicy& policy);
+// 1 to 256 of [A-Za-z0-9._-/], no leading '/'.
+Status ValidateRtspPushPath(const std::string& path);
+// A light syntax check (RFC 4566): "v=0" first, every line "<letter>=...",
+// a c= line and an m=video line with a port.
+Status ValidateSdp(const std::string& sdp);
+Status ValidatePipelineOptions(const v1::PipelineOptions& options);
+
+// The URL with any user:password@ replaced by ***@, for messages.
+std::string RedactUrl(const std::string& url);
+
+}  // namespace slapse::api

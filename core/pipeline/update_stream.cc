@@ -1,0 +1,50 @@
+#include "core/pipeline/update_stream.h"
+
+namespace slapse {
+
+StepUpdates UpdateStream::Next(const Pipeline& pipeline, const PipelineStep& step) {
+  StepUpdates out;
+  out.pose.anchor_index = step.later_index;
+  out.pose.timestamp_s = step.timestamp_s;
+  out.pose.world_from_cam = step.world_from_cam;
+  out.pose.tracking = step.tracking;
+  out.pose.metric = step.metric;
+  out.pose.note = step.note;
+
+  // A newly fixed scale rescales everything seen so far: send it all again.
+  const std::map<int, MapPlane>& map = pipeline.plane_map();
+  out.metric = pipeline.metric();
+  if (out.metric != metric_) {
+    metric_ = out.metric;
+    out.rescaled = true;
+    out.plane_map = &map;
+    points_sent_ = 0;
+  }
+  const auto& trajectory = pipeline.trajectory();
+  for (size_t i = points_sent_; i < trajectory.size(); ++i) {
+    TimedPose p;
+    p.index = trajectory[i].index;
+    p.timestamp_s = trajectory[i].timestamp_s;
+    p.world_from_cam = trajectory[i].world_from_cam;
+    out.new_points.push_back(p);
+  }
+  points_sent_ = trajectory.size();
+
+  std::set<int> now;
+  for (const PlaneTrack& t : step.planes) now.insert(t.track_id);
+  auto change = [&](int id, PlaneChange::Kind kind) {
+    auto it = map.find(id);
+    if (it == map.end()) return;
+    out.planes.push_back({kind, id, step.later_index, &it->second});
+  };
+  for (int id : now) {
+    change(id, live_planes_.count(id) ? PlaneChange::Kind::kUpdated : PlaneChange::Kind::kAdded);
+  }
+  for (int id : live_planes_) {
+    if (!now.count(id)) change(id, PlaneChange::Kind::kRemoved);
+  }
+  live_planes_ = std::move(now);
+  return out;
+}
+
+}  // namespace slapse

@@ -1,0 +1,96 @@
+// IngestSource: where a session's stream comes from, one implementation per
+// kind, each in its own file:
+//   source_upload.cc     the client's UploadStream bytes (no deadlines)
+//   source_rtsp_pull.cc  an RTSP server the session connects to, reconnecting
+//                        on an outage by its ReconnectPolicy
+//   source_rtsp_push.cc  an RTSP publisher that connects to the session's own
+//                        listener (ingest_url)
+//   source_rtp_sdp.cc    RTP packets described by an SDP
+// A source knows how to open its reader (one connection), its deadlines and
+// how a connection's end reads: it ends the session (Session::End /
+// EndStream) or asks for another connection after a wait. The session runner
+// (server/session_runner.cc) does the rest.
+//
+// Deadlines of network sources: start_timeout_ms from each connection attempt
+// until its first frame, then receive_timeout_ms per frame read (time blocked
+// in I/O); the runner's interrupt callback enforces them.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "core/common/status.h"
+#include "core/mv/mv_reader.h"
+#include "server/session.h"
+#include "slapse/v1/slapse.pb.h"
+
+namespace slapse::server {
+
+// How one connection of a session ended.
+struct ConnectionEnd {
+  Status status;               // why it ended, or why it could not be opened
+  bool opened = false;         // the reader opened
+  bool timed_out = false;      // a deadline interrupted it
+  int64_t frames = 0;          // frames this connection delivered
+  int64_t session_frames = 0;  // frames over the session's life
+};
+
+class IngestSource {
+ public:
+  // The source of `request` (a validated session, ingest_url assigned);
+  // `upload` feeds an upload session.
+  static std::unique_ptr<IngestSource> Make(const v1::Session& request,
+                                            std::shared_ptr<UploadQueue> upload);
+  virtual ~IngestSource() = default;
+
+  // Network sources have deadlines; an upload does not.
+  virtual bool network() const { return true; }
+  int start_timeout_ms() const { return start_timeout_ms_; }
+  int receive_timeout_ms() const { return receive_timeout_ms_; }
+
+  // Opens one connection; `interrupt` returning true aborts blocking I/O.
+  virtual StatusOr<std::unique_ptr<MvReader>> Open(std::function<bool()> interrupt) = 0;
+
+  // The FINISHED message when the stream ends by itself (OUT_OF_RANGE).
+  virtual std::string EndOfStreamMessage() const { return "the stream ended"; }
+
+  // After connection `end`: ends `session` and returns nullopt, or returns
+  // the wait in ms before the next connection (RTSP pull only).
+  virtual std::optional<int> AfterConnection(Session* session, const ConnectionEnd& end) = 0;
+
+ protected:
+  // 0 = the defaults (api/validate.h).
+  IngestSource(int start_timeout_ms, int receive_timeout_ms);
+
+ private:
+  int start_timeout_ms_;
+  int receive_timeout_ms_;
+};
+
+// The one-connection sources (upload, RTSP push, RTP/SDP): a connection's end
+// is the session's.
+class SingleConnectionSource : public IngestSource {
+ public:
+  std::optional<int> AfterConnection(Session* session, const ConnectionEnd& end) override;
+
+ protected:
+  using IngestSource::IngestSource;
+  // The ending after a deadline passed with `session_frames` read.
+  virtual Ending TimedOut(int64_t session_frames) const = 0;
+};
+
+// The sources (one file each).
+std::unique_ptr<IngestSource> MakeUploadSource(std::shared_ptr<UploadQueue> upload);
+std::unique_ptr<IngestSource> MakeRtspPullSource(const v1::RtspPull& pull);
+std::unique_ptr<IngestSource> MakeRtspPushSource(const v1::RtspPush& push,
+                                                 const std::string& ingest_url);
+std::unique_ptr<IngestSource> MakeRtpSdpSource(const v1::RtpSdp& rtp);
+
+// RTSP push: the ingest_url of a new session's listener on `host` (a free
+// port of its own) for `path`. UNAVAILABLE if no port is free.
+StatusOr<std::string> RtspPushIngestUrl(const std::string& host, const std::string& path);
+
+}  // namespace slapse::server

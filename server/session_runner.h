@@ -1,0 +1,78 @@
+// SessionRunner: runs one session on a worker thread, from its first
+// connection to its end. Per connection it opens the source's reader under
+// the source's deadlines, makes the Pipeline on the first one (checking the
+// intrinsics against the stream), splices later connections onto one
+// timeline (indices and timestamps continue, the pipeline Breaks), feeds the
+// frames, and turns each step's UpdateStream updates (core/pipeline/
+// update_stream.h) into the session's stats, snapshots and events (wire
+// messages via api/convert.h). How a connection's end reads is the source's
+// business (server/ingest_source.h).
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <optional>
+
+#include <google/protobuf/timestamp.pb.h>
+
+#include "core/mv/mv_reader.h"
+#include "core/pipeline/pipeline.h"
+#include "core/pipeline/update_stream.h"
+#include "server/ingest_source.h"
+#include "server/session.h"
+
+namespace slapse::server {
+
+class SessionRunner {
+ public:
+  explicit SessionRunner(std::shared_ptr<Session> session);
+  // Runs the session to its end (a terminal state).
+  void Run();
+
+ private:
+  using Clock = std::chrono::steady_clock;
+
+  // The reader's interrupt: the session was asked to stop, or a network
+  // source's deadline passed (then timed_out_).
+  bool Interrupt();
+  void SetDeadline(int ms);
+  // Reads connection `reader` to its end into `end`; false if the session
+  // ended inside it.
+  bool RunConnection(MvReader* reader, ConnectionEnd* end);
+  // First connection: makes the pipeline; later ones: checks the stream is
+  // the same and breaks the pipeline. Then continues the timeline. False if
+  // the session ended.
+  bool StartConnection(const StreamInfo& info);
+  bool MakePipeline(const StreamInfo& info);
+  // Puts `frame` on the session's timeline, runs it through the pipeline and
+  // publishes the result; false if the session ended.
+  bool Feed(FrameRecord frame);
+  void Publish(const FrameRecord& frame, const PipelineStep* step);
+  // With the session's lock held: the snapshots and the events of a step.
+  void ApplyUpdatesLocked(const StepUpdates& updates, std::vector<v1::SessionEvent>* events);
+  // Ends the session after its stream broke off with `status`.
+  void EndStream(const Status& status);
+
+  const std::shared_ptr<Session> session_;
+  std::unique_ptr<IngestSource> source_;
+  std::atomic<int64_t> deadline_ns_{0};
+  std::atomic<bool> timed_out_{false};
+
+  std::optional<Pipeline> pipeline_;
+  UpdateStream updates_;
+  StreamInfo first_info_;
+  Clock::time_point start_;                                  // when the pipeline was made
+  std::map<int64_t, google::protobuf::Timestamp> received_;  // frame index -> when read
+  int64_t frames_ = 0;                                       // over the session's life
+  int64_t pairs_ = 0, tracked_ = 0;
+  int64_t index_offset_ = 0;       // added to a connection's frame indices
+  double time_offset_s_ = 0.0;     // and to its timestamps
+  int64_t last_index_ = -1;        // of the last frame processed (offset)
+  double last_timestamp_s_ = 0.0;  // of the last frame processed (offset)
+  Clock::time_point last_frame_wall_;
+};
+
+}  // namespace slapse::server

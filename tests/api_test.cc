@@ -1,0 +1,238 @@
+// api/convert.h and api/validate.h: every option field survives core -> proto
+// -> core and proto -> core -> proto (one test per field, named after it),
+// "0 = default" takes the core struct's default, the camera, pose, trajectory
+// and plane-map conversions are exact, and request validation says what is
+// wrong in the server's words.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+
+#include <google/protobuf/util/message_differencer.h>
+
+#include "api/convert.h"
+#include "api/validate.h"
+
+namespace slapse {
+namespace {
+
+using google::protobuf::util::MessageDifferencer;
+
+// The fields a PipelineOptions carries over the wire, compared exactly; the
+// ones it does not carry must keep the struct defaults.
+void ExpectSameCarried(const PipelineOptions& a, const PipelineOptions& b) {
+  EXPECT_EQ(a.extraction.eps_h_px, b.extraction.eps_h_px);
+  EXPECT_EQ(a.scale.source, b.scale.source);
+  EXPECT_EQ(a.scale.first_step_m, b.scale.first_step_m);
+  EXPECT_EQ(a.scale.speed_mps, b.scale.speed_mps);
+  EXPECT_EQ(a.scale.camera_height_m, b.scale.camera_height_m);
+  EXPECT_EQ(a.scale.road_min_observations, b.scale.road_min_observations);
+  EXPECT_EQ(a.min_planes_to_initialise, b.min_planes_to_initialise);
+}
+
+// core -> proto -> core equals, and proto -> core -> proto equals.
+void ExpectRoundTrips(const PipelineOptions& core) {
+  const v1::PipelineOptions proto = api::PipelineOptionsToProto(core);
+  ExpectSameCarried(api::PipelineOptionsFromProto(proto), core);
+  const v1::PipelineOptions again =
+      api::PipelineOptionsToProto(api::PipelineOptionsFromProto(proto));
+  EXPECT_TRUE(MessageDifferencer::Equals(again, proto))
+      << again.DebugString() << " vs " << proto.DebugString();
+}
+
+TEST(PipelineOptionsRoundTrip, Defaults) {
+  ExpectRoundTrips(PipelineOptions{});
+  // An empty message is the defaults (eps_h_px 0 = PlaneExtractionOptions').
+  ExpectSameCarried(api::PipelineOptionsFromProto(v1::PipelineOptions{}), PipelineOptions{});
+}
+
+TEST(PipelineOptionsRoundTrip, EpsHPx) {
+  PipelineOptions o;
+  o.extraction.eps_h_px = 2.5;
+  ExpectRoundTrips(o);
+  EXPECT_EQ(api::PipelineOptionsToProto(o).eps_h_px(), 2.5);
+}
+
+TEST(PipelineOptionsRoundTrip, EpsHPxZeroIsTheStructDefault) {
+  v1::PipelineOptions p;
+  p.set_eps_h_px(0);
+  EXPECT_EQ(api::PipelineOptionsFromProto(p).extraction.eps_h_px,
+            PlaneExtractionOptions{}.eps_h_px);
+  // and the default travels as its value.
+  EXPECT_EQ(api::PipelineOptionsToProto(PipelineOptions{}).eps_h_px(),
+            PlaneExtractionOptions{}.eps_h_px);
+}
+
+TEST(PipelineOptionsRoundTrip, ScaleSourceUpToScale) {
+  PipelineOptions o;
+  o.scale.source = ScaleOptions::Source::kUpToScale;
+  ExpectRoundTrips(o);
+  EXPECT_EQ(api::PipelineOptionsToProto(o).scale_source(), v1::PipelineOptions::UP_TO_SCALE);
+}
+
+TEST(PipelineOptionsRoundTrip, ScaleSourceFirstStepAndFirstStepM) {
+  PipelineOptions o;
+  o.scale.source = ScaleOptions::Source::kFirstStep;
+  o.scale.first_step_m = 1.75;
+  ExpectRoundTrips(o);
+  const v1::PipelineOptions p = api::PipelineOptionsToProto(o);
+  EXPECT_EQ(p.scale_source(), v1::PipelineOptions::FIRST_STEP);
+  EXPECT_EQ(p.first_step_m(), 1.75);
+}
+
+TEST(PipelineOptionsRoundTrip, ScaleSourceSpeedAndSpeedMps) {
+  PipelineOptions o;
+  o.scale.source = ScaleOptions::Source::kSpeed;
+  o.scale.speed_mps = 13.9;
+  ExpectRoundTrips(o);
+  const v1::PipelineOptions p = api::PipelineOptionsToProto(o);
+  EXPECT_EQ(p.scale_source(), v1::PipelineOptions::SPEED);
+  EXPECT_EQ(p.speed_mps(), 13.9);
+}
+
+TEST(PipelineOptionsRoundTrip, ScaleSourceCameraHeightAndCameraHeightM) {
+  PipelineOptions o;
+  o.scale.source = ScaleOptions::Source::kCameraHeight;
+  o.scale.camera_height_m = 1.42;
+  ExpectRoundTrips(o);
+  const v1::PipelineOptions p = api::PipelineOptionsToProto(o);
+  EXPECT_EQ(p.scale_source(), v1::PipelineOptions::CAMERA_HEIGHT);
+  EXPECT_EQ(p.camera_height_m(), 1.42);
+}
+
+TEST(PipelineOptionsRoundTrip, OnlyTheSourcesParameterTravels) {
+  // A parameter of another source is not the request's: it keeps the default.
+  v1::PipelineOptions p;
+  p.set_scale_source(v1::PipelineOptions::SPEED);
+  p.set_speed_mps(10);
+  p.set_first_step_m(7);
+  p.set_camera_height_m(3);
+  const PipelineOptions o = api::PipelineOptionsFromProto(p);
+  EXPECT_EQ(o.scale.speed_mps, 10);
+  EXPECT_EQ(o.scale.first_step_m, ScaleOptions{}.first_step_m);
+  EXPECT_EQ(o.scale.camera_height_m, ScaleOptions{}.camera_height_m);
+}
+
+TEST(ConvertTest, IntrinsicsRoundTrip) {
+  Intrinsics k;
+  k.fx_px = 512.25;
+  k.fy_px = 511.5;
+  k.cx_px = 319.5;
+  k.cy_px = 239.25;
+  k.width_px = 640;
+  k.height_px = 480;
+  const Intrinsics back = api::IntrinsicsFromProto(api::IntrinsicsToProto(k));
+  EXPECT_EQ(back.fx_px, k.fx_px);
+  EXPECT_EQ(back.fy_px, k.fy_px);
+  EXPECT_EQ(back.cx_px, k.cx_px);
+  EXPECT_EQ(back.cy_px, k.cy_px);
+  EXPECT_EQ(back.width_px, k.width_px);
+  EXPECT_EQ(back.height_px, k.height_px);
+  const v1::Intrinsics p = api::IntrinsicsToProto(k);
+  EXPECT_TRUE(MessageDifferencer::Equals(api::IntrinsicsToProto(api::IntrinsicsFromProto(p)), p));
+}
+
+Rigid3d SomePose() {
+  return Rigid3d(Eigen::Quaterniond(Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 3).normalized())),
+                 Eigen::Vector3d(1.5, -2.25, 10.125));
+}
+
+TEST(ConvertTest, PoseAndTrajectoryRoundTrip) {
+  TimedPose p;
+  p.index = 42;
+  p.timestamp_s = 1.68;
+  p.world_from_cam = SomePose();
+  const v1::Trajectory::Point proto = api::TrajectoryPointToProto(p);
+  const TimedPose back = api::TimedPoseFromProto(proto);
+  EXPECT_EQ(back.index, 42);
+  EXPECT_EQ(back.timestamp_s, 1.68);
+  EXPECT_EQ(back.world_from_cam.translation, p.world_from_cam.translation);
+  EXPECT_EQ(back.world_from_cam.rotation.coeffs(), p.world_from_cam.rotation.coeffs());
+  EXPECT_TRUE(MessageDifferencer::Equals(api::TrajectoryPointToProto(back), proto));
+
+  v1::Trajectory t;
+  *t.add_points() = proto;
+  const auto points = api::TrajectoryFromProto(t);
+  ASSERT_EQ(points.size(), 1u);
+  EXPECT_EQ(points[0].index, 42);
+  EXPECT_EQ(points[0].world_from_cam.translation, p.world_from_cam.translation);
+}
+
+TEST(ConvertTest, MapPlaneRoundTrip) {
+  MapPlane mp;
+  mp.track_id = 7;
+  mp.normal_world = Eigen::Vector3d(0, -1, 0);
+  mp.distance_m = 1.6;
+  mp.first_seen_s = 0.5;
+  mp.last_seen_s = 3.25;
+  mp.observations = 12;
+  const v1::PlaneMap::Plane proto = api::MapPlaneToProto(mp);
+  const MapPlane back = api::MapPlaneFromProto(proto);
+  EXPECT_EQ(back.track_id, 7);
+  EXPECT_EQ(back.normal_world, mp.normal_world);
+  EXPECT_EQ(back.distance_m, 1.6);
+  EXPECT_EQ(back.first_seen_s, 0.5);
+  EXPECT_EQ(back.last_seen_s, 3.25);
+  EXPECT_EQ(back.observations, 12);
+  EXPECT_TRUE(MessageDifferencer::Equals(api::MapPlaneToProto(back), proto));
+
+  v1::PlaneMap map;
+  *map.add_planes() = proto;
+  const auto planes = api::PlaneMapFromProto(map);
+  ASSERT_EQ(planes.size(), 1u);
+  EXPECT_EQ(planes.at(7).observations, 12);
+}
+
+v1::Session ValidUpload() {
+  v1::Session s;
+  s.mutable_upload();
+  s.mutable_intrinsics()->set_fx_px(500);
+  s.mutable_intrinsics()->set_fy_px(500);
+  return s;
+}
+
+TEST(ValidateTest, SessionRequest) {
+  EXPECT_TRUE(api::ValidateSession(ValidUpload()).ok());
+  v1::Session s = ValidUpload();
+  s.clear_source();
+  EXPECT_EQ(api::ValidateSession(s).code(), StatusCode::kInvalidArgument);
+  s = ValidUpload();
+  s.mutable_intrinsics()->set_fx_px(std::numeric_limits<double>::quiet_NaN());
+  const Status bad_k = api::ValidateSession(s);
+  EXPECT_EQ(bad_k.code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(bad_k.message().rfind("intrinsics: fx_px and fy_px must be finite and > 0", 0), 0u)
+      << bad_k.message();
+  s = ValidUpload();
+  s.mutable_pipeline_options()->set_eps_h_px(101);
+  EXPECT_EQ(api::ValidateSession(s).message(),
+            "pipeline_options.eps_h_px must be in [0, 100] px (0 = default)");
+  s = ValidUpload();
+  s.mutable_pipeline_options()->set_scale_source(v1::PipelineOptions::SPEED);
+  EXPECT_EQ(api::ValidateSession(s).message(), "pipeline_options.speed_mps must be > 0 for SPEED");
+}
+
+TEST(ValidateTest, RtspUrlAndRedaction) {
+  EXPECT_TRUE(api::ValidateRtspUrl("rtsp://cam:554/1").ok());
+  EXPECT_TRUE(api::ValidateRtspUrl("rtsps://[::1]:8554/a").ok());
+  EXPECT_FALSE(api::ValidateRtspUrl("http://cam/1").ok());
+  EXPECT_FALSE(api::ValidateRtspUrl("rtsp://cam:0/1").ok());
+  const Status bad = api::ValidateRtspUrl("rtsp://user:secret@cam:99999/1");
+  EXPECT_EQ(bad.message().find("secret"), std::string::npos) << bad.message();
+  EXPECT_EQ(api::RedactUrl("rtsp://user:pw@cam/1"), "rtsp://***@cam/1");
+  EXPECT_EQ(api::RedactUrl("rtsp://cam/1"), "rtsp://cam/1");
+}
+
+TEST(ValidateTest, ReconnectPolicySdpAndPath) {
+  v1::ReconnectPolicy p;
+  EXPECT_TRUE(api::ValidateReconnectPolicy(p).ok());
+  p.set_backoff_multiplier(0.5);
+  EXPECT_FALSE(api::ValidateReconnectPolicy(p).ok());
+  EXPECT_TRUE(api::ValidateSdp("v=0\nc=IN IP4 127.0.0.1\nm=video 5004 RTP/AVP 96\n").ok());
+  EXPECT_FALSE(api::ValidateSdp("v=0\nm=video 5004 RTP/AVP 96\n").ok());
+  EXPECT_TRUE(api::ValidateRtspPushPath("cam/1").ok());
+  EXPECT_FALSE(api::ValidateRtspPushPath("/cam").ok());
+  EXPECT_FALSE(api::ValidateSourceTimeouts(-1, 0, "rtsp_push").ok());
+}
+
+}  // namespace
+}  // namespace slapse

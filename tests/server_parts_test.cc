@@ -1,0 +1,186 @@
+// The server's parts without a network: the session state machine (how a
+// session ends), the worker pool, and how each ingest source reads the end
+// of a connection (timeouts, end of stream, the RTSP pull reconnect policy).
+// The same behaviour end to end is in server_test and rtsp_pull_test.
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <memory>
+#include <optional>
+#include <thread>
+#include <vector>
+
+#include "server/ingest_source.h"
+#include "server/session.h"
+#include "server/worker_pool.h"
+
+namespace slapse::server {
+namespace {
+
+std::shared_ptr<Session> NewSession() {
+  auto s = std::make_shared<Session>("sessions/1", 64, UploadQueueOptions{});
+  s->Transition(v1::Session::CREATED, Status::Ok(), "created");
+  return s;
+}
+
+std::vector<v1::SessionEvent> AllEvents(Session& s) {
+  std::vector<v1::SessionEvent> out;
+  bool ended = false;
+  EXPECT_TRUE(s.events->Read(0, 1000, std::chrono::steady_clock::now(), &out, &ended).ok());
+  return out;
+}
+
+TEST(SessionTest, EndStreamFinishesAtTheEndAndFailsOtherwise) {
+  auto s = NewSession();
+  s->EndStream(OutOfRangeError("eof"), "the stream ended");
+  EXPECT_EQ(s->Snapshot().state(), v1::Session::FINISHED);
+  const auto events = AllEvents(*s);
+  ASSERT_EQ(events.size(), 2u);
+  EXPECT_EQ(events[1].state_change().message(), "the stream ended");
+
+  s = NewSession();
+  s->EndStream(UnavailableError("gone"), "unused");
+  EXPECT_EQ(s->Snapshot().state(), v1::Session::FAILED);
+  EXPECT_EQ(s->Snapshot().error().message(), "gone");
+}
+
+TEST(SessionTest, TheUploadsOwnErrorWinsAndStopWinsOverAll) {
+  auto s = NewSession();
+  s->ingest_error = ResourceExhaustedError("too big");
+  s->EndStream(OutOfRangeError("eof"), "the stream ended");
+  EXPECT_EQ(s->Snapshot().state(), v1::Session::FAILED);
+  EXPECT_EQ(s->Snapshot().error().code(), static_cast<int>(StatusCode::kResourceExhausted));
+
+  s = NewSession();
+  s->stop = true;  // asked to stop, not yet marked
+  s->End({v1::Session::FAILED, UnavailableError("x"), ""});
+  EXPECT_EQ(s->Snapshot().state(), v1::Session::STOPPED);
+  // Terminal states are final.
+  s->Transition(v1::Session::RUNNING, Status::Ok());
+  EXPECT_EQ(s->Snapshot().state(), v1::Session::STOPPED);
+}
+
+TEST(SessionTest, StopWakesAWait) {
+  auto s = NewSession();
+  std::thread stopper([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    s->Stop("stopped by test");
+  });
+  const auto t0 = std::chrono::steady_clock::now();
+  EXPECT_TRUE(s->WaitForStop(10000));
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(5));
+  stopper.join();
+  EXPECT_EQ(s->Snapshot().state(), v1::Session::STOPPED);
+}
+
+TEST(WorkerPoolTest, RunsQueuedJobsBeforeShutdownReturns) {
+  std::atomic<int> done{0};
+  WorkerPool pool(2);
+  for (int i = 0; i < 10; ++i) {
+    pool.Submit([&] {
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+      ++done;
+    });
+  }
+  pool.Shutdown();
+  EXPECT_EQ(done.load(), 10);
+  pool.Shutdown();  // idempotent
+}
+
+TEST(IngestSourceTest, RtpSdpTimeoutsFailBeforeVideoAndFinishAfter) {
+  v1::Session request;
+  request.mutable_rtp_sdp()->set_start_timeout_ms(1500);
+  auto source = IngestSource::Make(request, nullptr);
+  EXPECT_TRUE(source->network());
+  EXPECT_EQ(source->start_timeout_ms(), 1500);
+  EXPECT_EQ(source->receive_timeout_ms(), 5000);  // 0 = the default
+
+  auto s = NewSession();
+  ConnectionEnd end;
+  end.opened = true;
+  end.timed_out = true;
+  end.status = CancelledError("interrupted");
+  EXPECT_FALSE(source->AfterConnection(s.get(), end).has_value());
+  EXPECT_EQ(s->Snapshot().error().code(), static_cast<int>(StatusCode::kDeadlineExceeded));
+  EXPECT_EQ(s->Snapshot().error().message(), "no RTP video arrived within start_timeout_ms=1500");
+
+  s = NewSession();
+  end.frames = end.session_frames = 30;
+  EXPECT_FALSE(source->AfterConnection(s.get(), end).has_value());
+  EXPECT_EQ(s->Snapshot().state(), v1::Session::FINISHED);
+}
+
+TEST(IngestSourceTest, RtspPushEndsWithThePublisher) {
+  v1::Session request;
+  request.mutable_rtsp_push()->set_path("cam");
+  auto source = IngestSource::Make(request, nullptr);
+  auto s = NewSession();
+  ConnectionEnd end;
+  end.opened = true;
+  end.status = OutOfRangeError("eof");
+  end.frames = end.session_frames = 10;
+  EXPECT_FALSE(source->AfterConnection(s.get(), end).has_value());
+  EXPECT_EQ(s->Snapshot().state(), v1::Session::FINISHED);
+  const auto events = AllEvents(*s);
+  EXPECT_EQ(events.back().state_change().message(),
+            "the publisher ended the stream (TEARDOWN or closed connection)");
+}
+
+TEST(IngestSourceTest, UploadHasNoDeadline) {
+  v1::Session request;
+  request.mutable_upload();
+  EXPECT_FALSE(IngestSource::Make(request, nullptr)->network());
+}
+
+TEST(IngestSourceTest, RtspPullBacksOffThenGivesUp) {
+  v1::Session request;
+  request.mutable_rtsp_pull()->set_url("rtsp://user:pw@cam:554/1");
+  v1::ReconnectPolicy* p = request.mutable_rtsp_pull()->mutable_reconnect();
+  p->set_max_attempts(3);
+  p->set_initial_interval_ms(100);
+  p->set_max_interval_ms(250);
+  auto source = IngestSource::Make(request, nullptr);
+  auto s = NewSession();
+  ConnectionEnd refused;
+  // As Open reports it (credentials already dropped).
+  refused.status = UnavailableError("cannot open 'rtsp://***@cam:554/1': refused");
+  // 100, 200, then capped at 250 ms.
+  EXPECT_EQ(source->AfterConnection(s.get(), refused), std::optional<int>(100));
+  EXPECT_EQ(source->AfterConnection(s.get(), refused), std::optional<int>(200));
+  // Frames flowing end the outage: the next one starts again at 100 ms.
+  ConnectionEnd ended;
+  ended.opened = true;
+  ended.status = OutOfRangeError("eof");
+  ended.frames = 5;
+  EXPECT_EQ(source->AfterConnection(s.get(), ended), std::optional<int>(100));
+  EXPECT_EQ(source->AfterConnection(s.get(), refused), std::optional<int>(200));
+  EXPECT_EQ(source->AfterConnection(s.get(), refused), std::optional<int>(250));
+  EXPECT_EQ(s->Snapshot().stats().reconnects(), 5);
+  EXPECT_FALSE(source->AfterConnection(s.get(), refused).has_value());
+  const v1::Session snap = s->Snapshot();
+  EXPECT_EQ(snap.state(), v1::Session::FAILED);
+  EXPECT_EQ(snap.error().code(), static_cast<int>(StatusCode::kUnavailable));
+  EXPECT_EQ(snap.error().message().find("pw"), std::string::npos) << snap.error().message();
+  EXPECT_NE(snap.error().message().find("gave up after 3 reconnect attempt(s)"), std::string::npos)
+      << snap.error().message();
+  int reconnecting = 0;
+  for (const auto& e : AllEvents(*s)) reconnecting += e.has_reconnecting();
+  EXPECT_EQ(reconnecting, 5);
+}
+
+TEST(IngestSourceTest, RtspPullWithoutReconnectFinishesAStreamThatEnded) {
+  v1::Session request;
+  request.mutable_rtsp_pull()->set_url("rtsp://cam/1");
+  auto source = IngestSource::Make(request, nullptr);
+  auto s = NewSession();
+  ConnectionEnd ended;
+  ended.opened = true;
+  ended.status = OutOfRangeError("eof");
+  ended.frames = 5;
+  EXPECT_FALSE(source->AfterConnection(s.get(), ended).has_value());
+  EXPECT_EQ(s->Snapshot().state(), v1::Session::FINISHED);
+}
+
+}  // namespace
+}  // namespace slapse::server

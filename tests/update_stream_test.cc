@@ -1,0 +1,183 @@
+// UpdateStream on a real Pipeline over a small simulated drive: every step
+// gives one pose update with the step's pose; plane events are ADDED for a
+// track the filter did not hold before, UPDATED for one it keeps, REMOVED
+// for one it dropped (in that order, ascending ids); and a consumer that only
+// applies the updates (as the server's snapshots do) holds exactly the
+// pipeline's trajectory and plane map after every step, also across the
+// step where the metric scale gets fixed and everything is rescaled.
+#include <gtest/gtest.h>
+
+#include <map>
+#include <set>
+#include <vector>
+
+#include "core/mv/mv_reader.h"
+#include "core/pipeline/pipeline.h"
+#include "core/pipeline/update_stream.h"
+#include "tests/test_streams.h"
+
+namespace slapse {
+namespace {
+
+// What a consumer of the updates holds: the server's snapshots, in core types.
+struct Mirror {
+  std::vector<TimedPose> trajectory;
+  std::map<int, MapPlane> planes;
+  std::set<int> live;
+  bool metric = false;
+};
+
+// Checks `u` against the step and the consumer's state before it, then
+// applies it.
+void CheckAndApply(const Pipeline& pipeline, const PipelineStep& step, const StepUpdates& u,
+                   Mirror* m, int* rescales, std::map<PlaneChange::Kind, int>* kinds) {
+  EXPECT_EQ(u.pose.anchor_index, step.later_index);
+  EXPECT_EQ(u.pose.timestamp_s, step.timestamp_s);
+  EXPECT_EQ(u.pose.tracking, step.tracking);
+  EXPECT_EQ(u.pose.metric, step.metric);
+  EXPECT_EQ(u.pose.note, step.note);
+  EXPECT_EQ(u.pose.world_from_cam.translation, step.world_from_cam.translation);
+
+  std::set<int> now;
+  for (const PlaneTrack& t : step.planes) now.insert(t.track_id);
+  int last_id = -1;
+  bool removing = false;
+  for (const PlaneChange& c : u.planes) {
+    SCOPED_TRACE("track " + std::to_string(c.track_id));
+    ASSERT_NE(c.plane, nullptr);
+    EXPECT_EQ(c.plane->track_id, c.track_id);
+    EXPECT_EQ(c.anchor_index, step.later_index);
+    ++(*kinds)[c.kind];
+    switch (c.kind) {
+      case PlaneChange::Kind::kAdded:
+        EXPECT_TRUE(now.count(c.track_id) && !m->live.count(c.track_id));
+        break;
+      case PlaneChange::Kind::kUpdated:
+        EXPECT_TRUE(now.count(c.track_id) && m->live.count(c.track_id));
+        break;
+      case PlaneChange::Kind::kRemoved:
+        EXPECT_TRUE(!now.count(c.track_id) && m->live.count(c.track_id));
+        break;
+    }
+    // Ascending ids, the REMOVED ones after the others.
+    const bool removed = c.kind == PlaneChange::Kind::kRemoved;
+    if (removed && !removing) {
+      removing = true;
+      last_id = -1;
+    }
+    EXPECT_EQ(removed, removing);
+    EXPECT_GT(c.track_id, last_id);
+    last_id = c.track_id;
+  }
+  // Every live or previously live track the map holds has its event.
+  size_t expected = 0;
+  for (int id : now) expected += pipeline.plane_map().count(id);
+  for (int id : m->live) expected += !now.count(id) && pipeline.plane_map().count(id);
+  EXPECT_EQ(u.planes.size(), expected);
+  m->live = now;
+
+  EXPECT_EQ(u.metric, pipeline.metric());
+  if (u.rescaled) {
+    ++*rescales;
+    EXPECT_NE(u.metric, m->metric);
+    ASSERT_NE(u.plane_map, nullptr);
+    m->trajectory.clear();
+    m->planes = *u.plane_map;
+  } else {
+    EXPECT_EQ(u.metric, m->metric);
+  }
+  m->metric = u.metric;
+  for (const TimedPose& p : u.new_points) m->trajectory.push_back(p);
+  for (const PlaneChange& c : u.planes) m->planes[c.track_id] = *c.plane;
+}
+
+void ExpectMirrorsPipeline(const Mirror& m, const Pipeline& pipeline) {
+  const auto& traj = pipeline.trajectory();
+  ASSERT_EQ(m.trajectory.size(), traj.size());
+  for (size_t i = 0; i < traj.size(); ++i) {
+    EXPECT_EQ(m.trajectory[i].index, traj[i].index);
+    EXPECT_EQ(m.trajectory[i].timestamp_s, traj[i].timestamp_s);
+    EXPECT_EQ(m.trajectory[i].world_from_cam.translation, traj[i].world_from_cam.translation);
+    EXPECT_EQ(m.trajectory[i].world_from_cam.rotation.coeffs(),
+              traj[i].world_from_cam.rotation.coeffs());
+  }
+  ASSERT_EQ(m.planes.size(), pipeline.plane_map().size());
+  for (const auto& [id, p] : pipeline.plane_map()) {
+    ASSERT_TRUE(m.planes.count(id)) << id;
+    const MapPlane& q = m.planes.at(id);
+    EXPECT_EQ(q.normal_world, p.normal_world) << id;
+    EXPECT_EQ(q.distance_m, p.distance_m) << id;
+    EXPECT_EQ(q.first_seen_s, p.first_seen_s) << id;
+    EXPECT_EQ(q.last_seen_s, p.last_seen_s) << id;
+    EXPECT_EQ(q.observations, p.observations) << id;
+  }
+}
+
+class UpdateStreamTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    auto drive =
+        testing::SimulateTestDrive("update_stream", testing::SmallMpeg2DriveOptions(31, 3.0));
+    ASSERT_TRUE(drive.ok()) << drive.status().ToString();
+    drive_ = new testing::TestDrive(*drive);
+  }
+  static void TearDownTestSuite() {
+    delete drive_;
+    drive_ = nullptr;
+  }
+
+  // Runs the drive through a Pipeline with `options`, checking the updates
+  // after every step; returns the rescales seen.
+  void Run(const PipelineOptions& options, int* rescales) {
+    ASSERT_NE(drive_, nullptr);
+    auto reader = MvReader::Open(drive_->video_path);
+    ASSERT_TRUE(reader.ok()) << reader.status().ToString();
+    const StreamInfo& info = (*reader)->info();
+    Intrinsics k = drive_->intrinsics;
+    k.width_px = info.width_px;
+    k.height_px = info.height_px;
+    Pipeline pipeline(k, info.mv_sigma_px(), options);
+    UpdateStream stream;
+    Mirror mirror;
+    std::map<PlaneChange::Kind, int> kinds;
+    FrameRecord frame;
+    int steps = 0;
+    while ((*reader)->Next(&frame).ok()) {
+      auto step = pipeline.Push(frame);
+      ASSERT_TRUE(step.ok()) << step.status().ToString();
+      if (!step->has_value()) continue;
+      ++steps;
+      SCOPED_TRACE("step at anchor " + std::to_string((*step)->later_index));
+      const StepUpdates u = stream.Next(pipeline, **step);
+      CheckAndApply(pipeline, **step, u, &mirror, rescales, &kinds);
+      ExpectMirrorsPipeline(mirror, pipeline);
+      if (HasFatalFailure()) return;
+    }
+    EXPECT_GT(steps, 5);
+    // A drive has planes that come, stay and go.
+    EXPECT_GT(kinds[PlaneChange::Kind::kAdded], 0);
+    EXPECT_GT(kinds[PlaneChange::Kind::kUpdated], 0);
+  }
+
+  static testing::TestDrive* drive_;
+};
+
+testing::TestDrive* UpdateStreamTest::drive_ = nullptr;
+
+TEST_F(UpdateStreamTest, UpToScaleEventsAndSnapshots) {
+  int rescales = 0;
+  Run(PipelineOptions{}, &rescales);
+  EXPECT_EQ(rescales, 0);
+}
+
+TEST_F(UpdateStreamTest, FixedScaleResendsTheRescaledSnapshots) {
+  PipelineOptions o;
+  o.scale.source = ScaleOptions::Source::kFirstStep;
+  o.scale.first_step_m = 2.0;
+  int rescales = 0;
+  Run(o, &rescales);
+  EXPECT_EQ(rescales, 1);
+}
+
+}  // namespace
+}  // namespace slapse
