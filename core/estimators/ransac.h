@@ -1,5 +1,5 @@
 // A generic, deterministic RANSAC (in the shape of COLMAP's) with an optional
-// sampling subset, as SLAPSE's plane tracking needs (ALGORITHM.md §4).
+// sampling subset, as SLAPSE's plane tracking needs (paper Sec. V-C).
 //
 // An Estimator provides:
 //   using X_t = ...;  using Y_t = ...;  using M_t = ...;
