@@ -537,11 +537,12 @@ int PlaneExtractor::MinMbs(const PairFit& fit) const {
 }
 
 // The street-scene prior (see the options): the road test of
-// core/common/road.h against the learnt vertical. Two-sided for now (a plane
-// whose normal points up, e.g. a ceiling, passes too).
+// core/common/road.h against the learnt vertical, one-sided (a plane whose
+// normal points up, e.g. a ceiling or a canopy's underside, is no road; up to
+// this change the test took |n . down| and let them pass: no pinned output
+// changed, see docs/METHOD.md "Where each rule lives").
 bool PlaneExtractor::IsRoad(const ExtractedPlane& plane) const {
-  return IsRoadLike(*plane.m_later, down_, options_.max_road_tilt_deg) ||
-         IsRoadLike(-*plane.m_later, down_, options_.max_road_tilt_deg);
+  return IsRoadLike(*plane.m_later, down_, options_.max_road_tilt_deg);
 }
 
 // A wall (|n . down| <= sin(facade tilt)) or the road.

@@ -125,7 +125,8 @@ struct PlaneExtractionOptions {
   // walls and the horizontal road. A motion-constrained plane (m_later) is
   // kept only if its unit normal n is within max_facade_tilt_deg of
   // horizontal (|n . down| <= sin: a wall) or within max_road_tilt_deg of
-  // the vertical (|n . down| >= cos: the road). `down` is the vertical in
+  // down (n . down >= cos: the road below the camera, the one road test of
+  // core/common/road.h; a ceiling is no road). `down` is the vertical in
   // the camera frame: the camera's y axis at first (a camera mounted about
   // level), then learnt from the road planes found (the mean of their
   // normals, moved with each pair's rotation), so a pitched camera is
