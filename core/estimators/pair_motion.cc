@@ -58,13 +58,7 @@ struct RotationOnlyEstimator {
 
 Status ValidateInputs(const std::vector<Correspondence>& correspondences,
                       const Intrinsics& intrinsics, const PairMotionOptions& options) {
-  if (!(intrinsics.fx_px > 0.0) || !(intrinsics.fy_px > 0.0) || !std::isfinite(intrinsics.fx_px) ||
-      !std::isfinite(intrinsics.fy_px) || !std::isfinite(intrinsics.cx_px) ||
-      !std::isfinite(intrinsics.cy_px)) {
-    return InvalidArgumentError(
-        "EstimatePairMotion: intrinsics need positive finite focal "
-        "lengths and a finite principal point");
-  }
+  SLAPSE_RETURN_IF_ERROR(ValidateIntrinsics(intrinsics, "EstimatePairMotion: intrinsics"));
   SLAPSE_RETURN_IF_ERROR(options.Check("EstimatePairMotion"));
   for (size_t i = 0; i < correspondences.size(); ++i) {
     if (!correspondences[i].x_later_px.allFinite() ||
@@ -121,8 +115,28 @@ struct MotionProblem {
   RansacOptions rotation_ransac;
 };
 
-// The seeded fast path (see EstimatePairMotion); true when it was accepted
-// and filled `result`.
+// Seeded fast path (a prior given and options.use_prior). The motion of
+// consecutive anchor pairs changes slowly, so the previous pair's motion is a
+// good start: RefineRelativePose (core/estimators/relative_pose.h:
+// Levenberg-Marquardt on the Sampson distance over R and t on the unit sphere,
+// with LO-style inlier re-selection at 3, 2, 1.5, 1 x ransac_threshold_px)
+// refines it, and the rotation-only model is polished (LO, no random search)
+// from the refined R and the prior's R instead of a full RANSAC. The result is
+// accepted only if
+//  - its Sampson-inlier share (|r| f_mean <= ransac_threshold_px) is at least
+//    prior_min_inlier_ratio x the prior's reference_inlier_ratio (the share of
+//    the last full fit, so a refinement stuck in a worse local optimum is
+//    caught), and
+//  - it decides has_motion = true with a margin: (a) and (b) of FullPath's
+//    comment with prior_decision_margin x min_correspondences, (c) with
+//    prior_decision_margin x min_parallax_inlier_ratio, and cheirality for at
+//    least half the E-inliers.
+// Otherwise everything is recomputed by the full path (USAC_MAGSAC, the
+// rotation-only RANSAC): the fast path never decides "no motion", so the
+// degenerate cases keep the full logic. With the fast path, e_inlier_mask holds
+// the Sampson inliers of the refined motion and num_cheirality_inliers comes
+// from CountCheirality (recoverPose's test, own triangulation).
+// Returns true when it was accepted and filled `result`.
 bool SeededFastPath(const MotionProblem& p, const PairMotionPrior& prior,
                     PairMotionReport* result) {
   const int n = static_cast<int>(p.correspondences.size());
@@ -165,10 +179,20 @@ bool SeededFastPath(const MotionProblem& p, const PairMotionPrior& prior,
   return true;
 }
 
-// The essential matrix by USAC_MAGSAC and recoverPose's (R, t), with points1 =
-// earlier and points2 = later, so OpenCV's (R, t) is later_from_earlier. Fills
-// the E-inlier mask and cheirality count of `result`; *have_e when E gave a
-// finite pose with t != 0.
+// Full path, the essential matrix (EstimatePairMotion without a prior, or
+// when the prior is refused):
+//   cv::findEssentialMat(x_earlier, x_later, K, cv::USAC_MAGSAC, confidence,
+//   ransac_threshold_px) and cv::recoverPose (cheirality), which give
+//   later_from_earlier with |t| = 1. Pixels go in directly with K; OpenCV turns
+//   the threshold into normalised units by the mean focal length. USAC_MAGSAC,
+//   not cv::RANSAC: the latter returns a minimal-sample E, whose R is off by
+//   ~0.1 deg on the synthetic street (0.25 px noise) -- 0.8 px of fake parallax
+//   at f = 457 px, which alone pushes far points over tau_inf = 1 px. MAGSAC's
+//   polished E gives ~0.01-0.02 deg. OpenCV's USAC seeds its RNG with a fixed
+//   state, so the result is deterministic.
+// Points1 = earlier and points2 = later, so OpenCV's (R, t) is
+// later_from_earlier. Fills the E-inlier mask and cheirality count of
+// `result`; *have_e when E gave a finite pose with t != 0.
 Status EssentialMotion(const MotionProblem& p, PairMotionReport* result, bool* have_e,
                        Eigen::Matrix3d* R_e, Eigen::Vector3d* t_e) {
   const int n = static_cast<int>(p.correspondences.size());
@@ -212,8 +236,24 @@ Status EssentialMotion(const MotionProblem& p, PairMotionReport* result, bool* h
   return Status::Ok();
 }
 
-// The full path (file comment): the rotation-only RANSAC, E, and the
-// has_motion decision (a)-(c).
+// Degenerate epipolar geometry (has_motion = false, no error). With no or too
+// little translation, E is undetermined (every t fits a pure rotation), and the
+// R from recoverPose may be the wrong member of the twisted pair. So a
+// rotation-only model is fitted as well: our Ransac<> over 2-point Kabsch fits
+// on the bearing vectors, with the residual in pixels approximated as the mean
+// focal length times the normalised-image-plane error. Translation counts as
+// observed iff (a) cheirality holds for >= min_correspondences points, (b) at
+// least min_correspondences E-inliers deviate from that rotation-only model by
+// >= max(min_parallax_px, ransac_threshold_px) (parallax that E explains), and
+// (c) those are at least min_parallax_inlier_ratio of all points the
+// rotation-only model does not explain. (c) matters: under a pure rotation E is
+// free to pick the t that makes the most *wrong* MVs look epipolar-consistent;
+// with half the MVs wrong (+-32 px) that is 20-30 points with cheirality --
+// above any sensible absolute count -- but < 10% of them, while genuine
+// parallax points are almost all E-inliers. Otherwise has_motion = false,
+// later_from_earlier = (R_rotation_only, 0) -- or the identity when even that
+// fit fails or there are fewer than max(min_correspondences, 5) correspondences
+// (then nothing is estimated). Tests (a)-(c) are the has_motion decision below.
 Status FullPath(const MotionProblem& p, PairMotionReport* result) {
   const RansacReport<Eigen::Matrix3d> rotation =
       Ransac<RotationOnlyEstimator>(p.rotation_ransac).Estimate(p.rays_earlier, p.rays_later);

@@ -13,35 +13,14 @@
 //    its distance to x_later (the MB centre) is the correspondence's parallax
 //    in pixels (+infinity when x'_later is behind the camera).
 //
-// Full path (EstimatePairMotion without a prior, or when the prior is refused).
-//   cv::findEssentialMat(x_earlier, x_later, K, cv::USAC_MAGSAC, confidence,
-//   ransac_threshold_px) and cv::recoverPose (cheirality), which give
-//   later_from_earlier with |t| = 1. Pixels go in directly with K; OpenCV turns
-//   the threshold into normalised units by the mean focal length. USAC_MAGSAC,
-//   not cv::RANSAC: the latter returns a minimal-sample E, whose R is off by
-//   ~0.1 deg on the synthetic street (0.25 px noise) -- 0.8 px of fake parallax
-//   at f = 457 px, which alone pushes far points over tau_inf = 1 px. MAGSAC's
-//   polished E gives ~0.01-0.02 deg. OpenCV's USAC seeds its RNG with a fixed
-//   state, so the result is deterministic.
-//
-// Degenerate epipolar geometry (has_motion = false, no error). With no or too
-// little translation, E is undetermined (every t fits a pure rotation), and the
-// R from recoverPose may be the wrong member of the twisted pair. So a
-// rotation-only model is fitted as well: our Ransac<> over 2-point Kabsch fits
-// on the bearing vectors, with the residual in pixels approximated as the mean
-// focal length times the normalised-image-plane error. Translation counts as
-// observed iff (a) cheirality holds for >= min_correspondences points, (b) at
-// least min_correspondences E-inliers deviate from that rotation-only model by
-// >= max(min_parallax_px, ransac_threshold_px) (parallax that E explains), and
-// (c) those are at least min_parallax_inlier_ratio of all points the
-// rotation-only model does not explain. (c) matters: under a pure rotation E is
-// free to pick the t that makes the most *wrong* MVs look epipolar-consistent;
-// with half the MVs wrong (+-32 px) that is 20-30 points with cheirality --
-// above any sensible absolute count -- but < 10% of them, while genuine
-// parallax points are almost all E-inliers. Otherwise has_motion = false,
-// later_from_earlier = (R_rotation_only, 0) -- or the identity when even that
-// fit fails or there are fewer than max(min_correspondences, 5) correspondences
-// (then nothing is estimated).
+// The estimate (EstimatePairMotion; details above each part in pair_motion.cc):
+//  - full path: the essential matrix by USAC_MAGSAC with recoverPose's
+//    cheirality, and a rotation-only model by our Ransac<>; translation counts
+//    as observed (has_motion) only when enough E-inliers carry parallax that
+//    the rotation-only model cannot explain, else the rotation-only model (or
+//    the identity) is the motion;
+//  - seeded fast path: the previous pair's motion refined locally, accepted
+//    only when it decides has_motion clearly; otherwise the full path.
 //
 // Correspondences that are no E-inliers (wrong MVs) are not removed here:
 // e_inlier_mask lets callers drop them.
@@ -114,34 +93,14 @@ struct PairMotionReport {
   bool motion_from_prior = false;  // the seeded fast path was accepted
 };
 
-// Seeded fast path (a prior given and options.use_prior). The motion of
-// consecutive anchor pairs changes slowly, so the previous pair's motion is a
-// good start: RefineRelativePose (core/estimators/relative_pose.h:
-// Levenberg-Marquardt on the Sampson distance over R and t on the unit sphere,
-// with LO-style inlier re-selection at 3, 2, 1.5, 1 x ransac_threshold_px)
-// refines it, and the rotation-only model is polished (LO, no random search)
-// from the refined R and the prior's R instead of a full RANSAC. The result is
-// accepted only if
-//  - its Sampson-inlier share (|r| f_mean <= ransac_threshold_px) is at least
-//    prior_min_inlier_ratio x the prior's reference_inlier_ratio (the share of
-//    the last full fit, so a refinement stuck in a worse local optimum is
-//    caught), and
-//  - it decides has_motion = true with a margin: (a) and (b) of the file
-//    comment with prior_decision_margin x min_correspondences, (c) with
-//    prior_decision_margin x min_parallax_inlier_ratio, and cheirality for at
-//    least half the E-inliers.
-// Otherwise everything is recomputed by the full path (USAC_MAGSAC, the
-// rotation-only RANSAC): the fast path never decides "no motion", so the
-// degenerate cases keep the full logic. With the fast path, e_inlier_mask holds
-// the Sampson inliers of the refined motion and num_cheirality_inliers comes
-// from CountCheirality (recoverPose's test, own triangulation).
-//
+// The pair's motion: the seeded fast path when `prior` is given and
+// options.use_prior, else (or when the prior is refused) the full path.
 // min_parallax_px: a correspondence off the rotation-only model by at least
-// max(min_parallax_px, ransac_threshold_px) carries parallax (tests (b), (c));
-// the plane-at-infinity threshold passes its tau_inf_px.
-// InvalidArgument: intrinsics without positive finite focal lengths or a
-// finite principal point, non-finite correspondence coordinates, or options
-// failing Check(). Internal: OpenCV threw (not expected for finite input).
+// max(min_parallax_px, ransac_threshold_px) carries parallax (tests (b) and
+// (c) of the full path); the plane-at-infinity threshold passes its tau_inf_px.
+// InvalidArgument: intrinsics failing ValidateIntrinsics (core/common/camera.h),
+// non-finite correspondence coordinates, or options failing Check().
+// Internal: OpenCV threw (not expected for finite input).
 // prior: a guess of the motion for the seeded fast path (null: full path only).
 StatusOr<PairMotionReport> EstimatePairMotion(const std::vector<Correspondence>& correspondences,
                                               const Intrinsics& intrinsics,

@@ -52,9 +52,9 @@ struct InfinityResult : PairMotionReport {
 
 // Estimates the pair's motion (EstimatePairMotion with min_parallax_px =
 // tau_inf_px) and thresholds by its rotation.
-// InvalidArgument: intrinsics without positive finite focal lengths or a finite
-// principal point, non-finite correspondence coordinates, or non-positive
-// thresholds. Internal: OpenCV threw (not expected for finite input).
+// InvalidArgument: tau_inf_px <= 0, or EstimatePairMotion's (intrinsics,
+// options, non-finite coordinates). Internal: OpenCV threw (not expected for
+// finite input).
 // prior: a guess of the motion for the seeded fast path (null: full path only).
 StatusOr<InfinityResult> ThresholdInfinity(const std::vector<Correspondence>& correspondences,
                                            const Intrinsics& intrinsics,
