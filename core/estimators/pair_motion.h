@@ -1,6 +1,6 @@
 // The relative motion of an anchor pair from its merged MB correspondences
 // (paper Sec. V-B, which needs the rotation to threshold the plane at
-// infinity; docs/METHOD.md "Pair motion").
+// infinity; docs/METHOD.md "Pair motion and plane at infinity").
 //
 // Conventions.
 //  - Pixels as in core/common/camera.h (pixel centres on integers).

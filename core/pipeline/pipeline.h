@@ -86,7 +86,7 @@ struct PipelineStep {
   // Per extracted plane: the track id of the filter plane it is an
   // observation of (its own id, or the road's when the filter re-identified
   // it as the road; PlaneEkf::FilterTrackId). The one bridge between the two
-  // identities a plane has (docs/METHOD.md "Plane identity"): the
+  // identities a plane has (docs/METHOD.md "Where each rule lives"): the
   // extractor's track id (MB sets followed from pair to pair) and the
   // filter's (which merges re-found road tracks into one plane and splits a
   // track that fails the association gate).

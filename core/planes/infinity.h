@@ -1,6 +1,6 @@
-// Plane-at-infinity thresholding (paper Sec. V-B; docs/METHOD.md "Plane at
-// infinity"): drop the correspondences whose motion is explained by the
-// camera rotation alone.
+// Plane-at-infinity thresholding (paper Sec. V-B; docs/METHOD.md "Pair motion
+// and plane at infinity"): drop the correspondences whose motion is explained
+// by the camera rotation alone.
 //
 // Given the pair's motion (core/estimators/pair_motion.h: its rotation R,
 // later_from_earlier, from the essential matrix or the rotation-only fit),
