@@ -14,14 +14,14 @@
 namespace slapse {
 namespace {
 
-Intrinsics TestIntrinsics() {
-  Intrinsics k;
-  k.fx_px = k.fy_px = 457.0;
-  k.cx_px = 319.5;
-  k.cy_px = 239.5;
-  k.width_px = 640;
-  k.height_px = 480;
-  return k;
+// 640x480, f = 457 px, pixel centres on integers.
+Intrinsics TestIntrinsics() { return Intrinsics{457.0, 457.0, 319.5, 239.5, 640, 480}; }
+
+AnchorPair PairOf(int64_t earlier_index, int64_t later_index) {
+  AnchorPair pair;
+  pair.earlier_index = earlier_index;
+  pair.later_index = later_index;
+  return pair;
 }
 
 // Correspondences of random points under later_from_earlier.
@@ -96,13 +96,7 @@ TEST(PairMotionTest, ThresholdInfinityIsTheMotionThenTheThreshold) {
 }
 
 TEST(PairMotionTest, PriorTrackerSeedsOnlyConnectedPairs) {
-  AnchorPair first, second, unrelated;
-  first.earlier_index = 0;
-  first.later_index = 4;
-  second.earlier_index = 4;
-  second.later_index = 8;
-  unrelated.earlier_index = 12;
-  unrelated.later_index = 16;
+  AnchorPair first = PairOf(0, 4), second = PairOf(4, 8), unrelated = PairOf(12, 16);
   first.correspondences = Observe(Forward(), 300);
   auto m = EstimatePairMotion(first.correspondences, TestIntrinsics(), PairMotionOptions(), 6.0);
   ASSERT_TRUE(m.ok() && m->has_motion);
@@ -113,11 +107,8 @@ TEST(PairMotionTest, PriorTrackerSeedsOnlyConnectedPairs) {
   EXPECT_NEAR(tracker.PriorFor(second)->reference_inlier_ratio,
               static_cast<double>(m->num_sampson_inliers) / 300, 1e-12);
   EXPECT_EQ(tracker.PriorFor(unrelated), nullptr);
-  AnchorPair third;
-  third.earlier_index = 8;
-  third.later_index = 12;
   tracker.Record(second, nullptr);  // failed: no prior for what follows
-  EXPECT_EQ(tracker.PriorFor(third), nullptr);
+  EXPECT_EQ(tracker.PriorFor(PairOf(8, 12)), nullptr);
 }
 
 }  // namespace
