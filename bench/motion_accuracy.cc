@@ -1,7 +1,8 @@
 // motion_accuracy: per anchor pair, the rotation and translation-direction
-// errors of ThresholdInfinity's motion against a simulated drive's ground
-// truth, for the full robust fit (no prior) and the seeded fast path (the
-// previous pair's motion as prior, as the pipeline passes it).
+// errors of the pair's motion (core/estimators/pair_motion.h) against a
+// simulated drive's ground truth, for the full robust fit (no prior) and the
+// seeded fast path (the previous pair's motion as prior: the pipeline's front
+// end, core/pipeline/front_end.h, as `slapse run` computes it).
 //   build/bench/motion_accuracy DRIVE_DIR [DRIVE_DIR ...]
 #include <cmath>
 #include <cstdio>
@@ -9,31 +10,28 @@
 #include <string>
 #include <vector>
 
-#include "core/merge/mv_merge.h"
+#include "core/common/angles.h"
+#include "core/estimators/pair_motion.h"
 #include "core/mv/mv_reader.h"
-#include "core/planes/infinity.h"
+#include "core/pipeline/front_end.h"
 #include "core/sim/ground_truth.h"
 
 namespace {
 
 double AngleDeg(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
-  return Eigen::AngleAxisd(a.transpose() * b).angle() * 180.0 / M_PI;
-}
-double DirAngleDeg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
-  return std::acos(std::max(-1.0, std::min(1.0, a.normalized().dot(b.normalized())))) * 180.0 /
-         M_PI;
+  return slapse::RadToDeg(Eigen::AngleAxisd(a.transpose() * b).angle());
 }
 
 struct Acc {
   int n = 0, motion = 0, from_prior = 0;
   double sq_rot = 0, sq_dir = 0;
-  void Add(const slapse::InfinityResult& r, const slapse::Rigid3d& truth) {
+  void Add(const slapse::PairMotionReport& r, const slapse::Rigid3d& truth) {
     ++n;
     if (!r.has_motion) return;
     ++motion;
     from_prior += r.motion_from_prior;
     const double er = AngleDeg(r.later_from_earlier.R(), truth.R());
-    const double et = DirAngleDeg(r.later_from_earlier.translation, truth.translation);
+    const double et = slapse::AngleBetweenDeg(r.later_from_earlier.translation, truth.translation);
     sq_rot += er * er;
     sq_dir += et * et;
   }
@@ -58,20 +56,20 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "cannot read %s\n", dir.c_str());
       return 1;
     }
-    slapse::SegmentMerger merger(gt->intrinsics.width_px, gt->intrinsics.height_px,
-                                 (*reader)->info().mv_sigma_px(), {});
-    slapse::InfinityPriorTracker tracker;
+    slapse::FrontEnd front_end(gt->intrinsics, (*reader)->info().mv_sigma_px());
+    const slapse::InfinityOptions options;
     Acc full, seeded;
     slapse::FrameRecord frame;
     while ((*reader)->Next(&frame).ok()) {
-      std::optional<slapse::AnchorPair> pair = merger.Push(frame);
-      if (!pair.has_value()) continue;
-      const slapse::Rigid3d truth = gt->frames[pair->later_index].world_from_cam.Inverse() *
-                                    gt->frames[pair->earlier_index].world_from_cam;
-      auto f = slapse::ThresholdInfinity(pair->correspondences, gt->intrinsics, {});
-      auto s = slapse::ThresholdInfinity(pair->correspondences, gt->intrinsics, {},
-                                         tracker.PriorFor(*pair));
-      tracker.Record(*pair, s.ok() ? &*s : nullptr);
+      std::optional<slapse::FrontEndStep> step = front_end.Push(frame);
+      if (!step.has_value()) continue;
+      const slapse::AnchorPair& pair = step->pair;
+      const slapse::Rigid3d truth = gt->frames[pair.later_index].world_from_cam.Inverse() *
+                                    gt->frames[pair.earlier_index].world_from_cam;
+      // The full fit: no prior.
+      auto f = slapse::EstimatePairMotion(pair.correspondences, gt->intrinsics, options,
+                                          options.tau_inf_px);
+      const auto& s = step->infinity;
       if (!f.ok() || !s.ok()) continue;
       full.Add(*f, truth);
       seeded.Add(*s, truth);

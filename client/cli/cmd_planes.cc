@@ -14,6 +14,7 @@
 #include "core/eval/extraction_eval.h"
 #include "core/merge/mv_merge.h"
 #include "core/mv/mv_reader.h"
+#include "core/pipeline/front_end.h"
 #include "core/planes/infinity.h"
 #include "core/planes/plane_extraction.h"
 #include "core/sim/simulate.h"
@@ -74,32 +75,34 @@ int RunPlanes(int argc, char** argv) {
       IntrinsicsFor(flags.GetString("intrinsics"), input, info.width_px, info.height_px);
   if (!intrinsics.ok()) return Fail("planes", intrinsics.status().message(), 2);
 
-  SegmentMerger merger(info.width_px, info.height_px, info.mv_sigma_px());
-  PlaneExtractionOptions po;
-  po.eps_h_px = *eps;
-  PlaneExtractor extractor(po);
-  InfinityOptions io;
-  io.tau_inf_px = *tau;
+  // The pipeline's front end, as `run` computes it (motion prior included); a
+  // pair whose motion or extraction fails has no planes, as in `run`.
+  FrontEndOptions fo;
+  fo.extraction.eps_h_px = *eps;
+  fo.infinity.tau_inf_px = *tau;
+  FrontEnd front_end(*intrinsics, info.mv_sigma_px(), fo);
   FrameRecord f;
   Status end;
   while ((end = (*reader)->Next(&f)).ok()) {
-    std::optional<AnchorPair> pair = merger.Push(f);
-    if (!pair.has_value()) continue;
-    auto inf = ThresholdInfinity(pair->correspondences, *intrinsics, io);
-    if (!inf.ok()) return Fail("planes", inf.status().ToString());
-    auto planes = extractor.Process(*pair, *inf, *intrinsics);
-    if (!planes.ok()) return Fail("planes", planes.status().ToString());
-    if (pair->later_index < *frame_index) continue;
-    const cv::Mat picture =
-        DrawPlanes(f.luma, info.width_px, info.height_px, *pair, planes->planes);
+    std::optional<FrontEndStep> step = front_end.Push(f);
+    if (!step.has_value() || step->pair.later_index < *frame_index) continue;
+    const AnchorPair& pair = step->pair;
+    const std::vector<ExtractedPlane> planes =
+        step->extraction.ok() ? step->extraction->planes : std::vector<ExtractedPlane>();
+    const cv::Mat picture = DrawPlanes(f.luma, info.width_px, info.height_px, pair, planes);
     if (!cv::imwrite(flags.GetString("png"), picture)) {
       return Fail("planes", "cannot write " + flags.GetString("png"));
     }
     std::printf("anchors %lld -> %lld (%s): %zu correspondences, %zu with parallax, %zu planes\n",
-                static_cast<long long>(pair->earlier_index),
-                static_cast<long long>(pair->later_index), SegmentTypeName(pair->type),
-                pair->correspondences.size(), inf->kept_indices.size(), planes->planes.size());
-    for (const ExtractedPlane& p : planes->planes) {
+                static_cast<long long>(pair.earlier_index),
+                static_cast<long long>(pair.later_index), SegmentTypeName(pair.type),
+                pair.correspondences.size(),
+                step->infinity.ok() ? step->infinity->kept_indices.size() : size_t{0},
+                planes.size());
+    for (const Status* s : {&step->infinity.status(), &step->extraction.status()}) {
+      if (!s->ok()) std::printf("  no planes: %s\n", s->ToString().c_str());
+    }
+    for (const ExtractedPlane& p : planes) {
       std::printf("  plane %d: %zu MBs%s\n", p.track_id, p.mb_indices.size(),
                   p.tracked ? " (tracked)" : " (new)");
     }

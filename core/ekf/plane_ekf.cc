@@ -6,6 +6,8 @@
 
 #include <Eigen/Cholesky>
 
+#include "core/common/angles.h"
+#include "core/common/road.h"
 #include "core/common/so3.h"
 
 namespace slapse {
@@ -273,11 +275,11 @@ double PlaneEkf::RoadHeightChange(const Eigen::Vector3d& pi_road, const Eigen::V
   return pi_road.dot(t);
 }
 
-// Road-like: unit normal n = pi / |pi| within road_max_angle_deg of +y (the
-// camera's down axis), which with pi^T X = 1 puts the plane below the camera.
+// Road-like (core/common/road.h): unit normal n = pi / |pi| within
+// road_max_angle_deg of +y (the camera's down axis), which with pi^T X = 1
+// puts the plane below the camera.
 bool PlaneEkf::IsRoadLike(const Eigen::Vector3d& pi) const {
-  const double norm = pi.norm();
-  return norm > 0 && pi.y() / norm >= std::cos(options_.road_max_angle_deg * M_PI / 180.0);
+  return slapse::IsRoadLike(pi, CameraDown(), options_.road_max_angle_deg);
 }
 
 int PlaneEkf::RoadIndex() const {
@@ -331,6 +333,16 @@ bool PlaneEkf::AddPlane(const PlaneObservation& obs) {
   return true;
 }
 
+// Update, in four steps:
+//  1. association: observation ids map through the road aliases; planes
+//     without an observation are deleted (the road coasts);
+//  2. the road seen again under a new track id joins the road (ReidentifyRoad)
+//     and tracked planes failing the association gate start new ones
+//     (GateAssociation);
+//  3. the iterated update with the tracked observations (IteratedUpdate; the
+//     equations are in the file comment of plane_ekf.h) and the scale gauge
+//     (PinScale);
+//  4. the new planes are added with the updated motion.
 Status PlaneEkf::Update(const std::vector<PlaneObservation>& observations, UpdateReport* report) {
   if (!initialized_) return FailedPreconditionError("EKF not initialised");
   UpdateReport local;
@@ -342,6 +354,32 @@ Status PlaneEkf::Update(const std::vector<PlaneObservation>& observations, Updat
       return InvalidArgumentError("plane observation with mismatched correspondence arrays");
     }
   }
+  Association a = Associate(observations, &rep);
+  ReidentifyRoad(&a, &rep);
+  if (options_.association_gate > 0) GateAssociation(&a, &rep);
+  rep.skipped = a.tracked.empty();
+  if (!a.tracked.empty()) {
+    std::vector<Eigen::Vector3d> pi0;
+    SLAPSE_RETURN_IF_ERROR(IteratedUpdate(a.tracked, &rep, &pi0));
+    if (options_.pin_scale_min_observations > 0) PinScale(a.tracked, pi0, &rep);
+    std::set<size_t> updated;
+    for (const auto& [index, obs] : a.tracked) updated.insert(index);
+    for (size_t index : updated) ++planes_[index].observations;
+    rep.planes_updated = static_cast<int>(updated.size());
+  }
+  // Add the new planes with the updated motion.
+  for (const PlaneObservation* o : a.fresh) {
+    if (AddPlane(*o)) {
+      ++rep.planes_added;
+    } else {
+      ++rep.planes_rejected;
+    }
+  }
+  return Status::Ok();
+}
+
+PlaneEkf::Association PlaneEkf::Associate(const std::vector<PlaneObservation>& observations,
+                                          UpdateReport* rep) {
   // Observation track ids that were re-identified as the road refer to it;
   // aliases of tracks that ended are forgotten.
   std::vector<int> ids;
@@ -353,7 +391,7 @@ Status PlaneEkf::Update(const std::vector<PlaneObservation>& observations, Updat
       it = raw_ids.count(it->first) ? std::next(it) : road_aliases_.erase(it);
     }
   }
-  // 1. Delete planes that found no correspondence set; the road coasts.
+  // Delete planes that found no correspondence set; the road coasts.
   const std::set<int> observed_ids(ids.begin(), ids.end());
   for (size_t i = planes_.size(); i-- > 0;) {
     PlaneTrack& plane = planes_[i];
@@ -361,256 +399,280 @@ Status PlaneEkf::Update(const std::vector<PlaneObservation>& observations, Updat
       plane.missed_updates = 0;
     } else if (plane.road && plane.missed_updates < options_.road_coast_updates) {
       ++plane.missed_updates;
-      rep.road_coasting = true;
+      rep->road_coasting = true;
     } else {
       RemovePlane(i);
-      ++rep.planes_removed;
+      ++rep->planes_removed;
     }
   }
-  // 2. Update with the tracked planes' observations (a plane may have several:
-  // the road in two pieces).
-  std::vector<std::pair<size_t, const PlaneObservation*>> tracked;
-  std::vector<const PlaneObservation*> fresh;
+  // The tracked planes' observations (a plane may have several: the road in
+  // two pieces) and the fresh ones.
+  Association a;
   for (size_t k = 0; k < observations.size(); ++k) {
     auto it = std::find_if(planes_.begin(), planes_.end(),
                            [&](const PlaneTrack& p) { return p.track_id == ids[k]; });
     if (it == planes_.end()) {
-      fresh.push_back(&observations[k]);
+      a.fresh.push_back(&observations[k]);
     } else {
-      tracked.emplace_back(static_cast<size_t>(it - planes_.begin()), &observations[k]);
+      a.tracked.emplace_back(static_cast<size_t>(it - planes_.begin()), &observations[k]);
     }
   }
-  // The road seen again under a new track id: a new plane (fitted with the
-  // predicted motion) with the kept road's normal and, within the allowed
-  // scale drift, its distance. Not gated by the innovation test below: after
-  // a gap the drifted scale is exactly what this observation corrects.
-  std::set<const PlaneObservation*> reidentified;
+  return a;
+}
+
+// The road seen again under a new track id: a new plane (fitted with the
+// predicted motion) that is road-like, with the kept road's normal (within
+// road_reid_max_angle_deg) and, within the allowed scale drift, its distance.
+// Not gated by the innovation test: after a gap the drifted scale is exactly
+// what this observation corrects.
+void PlaneEkf::ReidentifyRoad(Association* a, UpdateReport* rep) {
   const int road = RoadIndex();
-  if (road >= 0) {
-    const Eigen::Vector3d& road_pi = planes_[road].pi;
-    const double cos_max = std::cos(options_.road_reid_max_angle_deg * M_PI / 180.0);
-    for (size_t k = fresh.size(); k-- > 0;) {
-      Eigen::Vector3d pi;
-      if (!FitNewPlane(*fresh[k], &pi, nullptr, nullptr) || !IsRoadLike(pi)) continue;
-      const double ratio = pi.norm() / road_pi.norm();
-      if (pi.normalized().dot(road_pi.normalized()) < cos_max ||
-          !(ratio <= options_.road_reid_max_distance_ratio &&
-            ratio >= 1.0 / options_.road_reid_max_distance_ratio)) {
+  if (road < 0) return;
+  const Eigen::Vector3d& road_pi = planes_[road].pi;
+  const double cos_max = std::cos(DegToRad(options_.road_reid_max_angle_deg));
+  for (size_t k = a->fresh.size(); k-- > 0;) {
+    Eigen::Vector3d pi;
+    if (!FitNewPlane(*a->fresh[k], &pi, nullptr, nullptr) || !IsRoadLike(pi)) continue;
+    const double ratio = pi.norm() / road_pi.norm();
+    if (pi.normalized().dot(road_pi.normalized()) < cos_max ||
+        !(ratio <= options_.road_reid_max_distance_ratio &&
+          ratio >= 1.0 / options_.road_reid_max_distance_ratio)) {
+      continue;
+    }
+    road_aliases_[a->fresh[k]->track_id] = planes_[road].track_id;
+    planes_[road].missed_updates = 0;
+    rep->road_coasting = false;
+    a->tracked.emplace_back(static_cast<size_t>(road), a->fresh[k]);
+    a->reidentified.insert(a->fresh[k]);
+    a->fresh.erase(a->fresh.begin() + static_cast<std::ptrdiff_t>(k));
+    ++rep->planes_reidentified;
+  }
+}
+
+// Association gate at the prior: with J = [dz/dtheta, dz/dt, dz/dpi] of one MB
+// and P9 the prior covariance of (theta, t, pi), the innovation covariance is
+//   S = J P9 J^T + (s^2 + extra_sigma_px^2) I,
+// and the MB's squared Mahalanobis innovation r^T S^-1 r (r = z - h(x)).
+std::optional<double> PlaneEkf::MedianInnovation(size_t index,
+                                                 const PlaneObservation& obs) const {
+  const double extra2 = options_.extra_sigma_px * options_.extra_sigma_px;
+  const int o = PlaneOffset(index);
+  Eigen::Matrix<double, 9, 9> P9;
+  P9.topLeftCorner<6, 6>() = P_.block<6, 6>(kTheta, kTheta);
+  P9.topRightCorner<6, 3>() = P_.block<6, 3>(kTheta, o);
+  P9.bottomLeftCorner<3, 6>() = P_.block<3, 6>(o, kTheta);
+  P9.bottomRightCorner<3, 3>() = P_.block<3, 3>(o, o);
+  std::vector<double> chi2;
+  for (size_t j = 0; j < obs.x_later_px.size(); ++j) {
+    Eigen::Vector2d z;
+    Eigen::Matrix<double, 2, 3> d_theta, d_t, d_pi;
+    if (!ObservePoint(K_, K_inv_, R_, t_, planes_[index].pi, obs.x_later_px[j], &z, &d_theta,
+                      &d_t, &d_pi)) {
+      chi2.push_back(1e9);
+      continue;
+    }
+    Eigen::Matrix<double, 2, 9> J;
+    J << d_theta, d_t, d_pi;
+    const Eigen::Matrix2d S =
+        J * P9 * J.transpose() + (obs.variance_px2[j] + extra2) * Eigen::Matrix2d::Identity();
+    const Eigen::Vector2d r = obs.x_earlier_px[j] - z;
+    chi2.push_back(r.dot(S.ldlt().solve(r)));
+  }
+  if (chi2.empty()) return std::nullopt;
+  std::nth_element(chi2.begin(), chi2.begin() + chi2.size() / 2, chi2.end());
+  return chi2[chi2.size() / 2];
+}
+
+// A plane whose macroblocks sit far outside the innovation covariance (median
+// above association_gate) is a different surface under an old track id: it is
+// dropped and all its observations start new planes.
+void PlaneEkf::GateAssociation(Association* a, UpdateReport* rep) {
+  std::set<size_t> failed;
+  for (const auto& [index, obs_ptr] : a->tracked) {
+    if (a->reidentified.count(obs_ptr)) continue;
+    const std::optional<double> median = MedianInnovation(index, *obs_ptr);
+    if (median.has_value() && *median > options_.association_gate) failed.insert(index);
+  }
+  std::vector<TrackedObservation>& tracked = a->tracked;
+  for (auto f = failed.rbegin(); f != failed.rend(); ++f) {
+    const size_t index = *f;
+    RemovePlane(index);
+    ++rep->planes_reassociated;
+    for (size_t k = tracked.size(); k-- > 0;) {
+      if (tracked[k].first == index) {
+        a->fresh.push_back(tracked[k].second);
+        tracked.erase(tracked.begin() + static_cast<std::ptrdiff_t>(k));
+      } else if (tracked[k].first > index) {
+        --tracked[k].first;
+      }
+    }
+  }
+}
+
+// One Gauss-Newton step's normal equations (file comment of plane_ekf.h):
+//   info += sum_j w_j J_j^T J_j,  rhs += sum_j w_j J_j^T r_j,
+// J_j = [dz/dtheta, dz/dt, dz/dpi] (2x9, only the motion and its plane's
+// columns), w_j = 1 / (s_j^2 + extra^2) times the Huber weight
+// min(1, huber_k / |r_j| sqrt(w_j)).
+// The road's constant height (road_height_rel_sigma): the camera stays at the
+// same distance above the road, so the step moves along it,
+//   c(t, pi_road) = pi_road^T t = 0  (n^T t / d: the step's height change
+//   relative to the height),
+// a scalar pseudo-measurement with dc/dt = pi_road^T, dc/dpi_road = t^T.
+// It holds while the road is coasting too (PlaneTrack::missed_updates).
+void PlaneEkf::AccumulateMeasurements(const std::vector<TrackedObservation>& tracked,
+                                      Eigen::MatrixXd* info_out, Eigen::VectorXd* rhs_out,
+                                      double* sq_sum, int* count) const {
+  Eigen::MatrixXd& info = *info_out;
+  Eigen::VectorXd& rhs = *rhs_out;
+  const double extra2 = options_.extra_sigma_px * options_.extra_sigma_px;
+  for (const auto& [index, obs] : tracked) {
+    const int o = PlaneOffset(index);
+    for (size_t j = 0; j < obs->x_later_px.size(); ++j) {
+      Eigen::Vector2d z;
+      Eigen::Matrix<double, 2, 9> J;
+      Eigen::Matrix<double, 2, 3> d_theta, d_t, d_pi;
+      if (!ObservePoint(K_, K_inv_, R_, t_, planes_[index].pi, obs->x_later_px[j], &z, &d_theta,
+                        &d_t, &d_pi)) {
         continue;
       }
-      road_aliases_[fresh[k]->track_id] = planes_[road].track_id;
-      planes_[road].missed_updates = 0;
-      rep.road_coasting = false;
-      tracked.emplace_back(static_cast<size_t>(road), fresh[k]);
-      reidentified.insert(fresh[k]);
-      fresh.erase(fresh.begin() + static_cast<std::ptrdiff_t>(k));
-      ++rep.planes_reidentified;
+      J << d_theta, d_t, d_pi;
+      const Eigen::Vector2d r = obs->x_earlier_px[j] - z;
+      const double var = obs->variance_px2[j] + extra2;
+      double w = 1.0 / var;
+      const double norm_r = r.norm() / std::sqrt(var);
+      if (options_.huber_k > 0 && norm_r > options_.huber_k) w *= options_.huber_k / norm_r;
+      const Eigen::Matrix<double, 9, 9> JtJ = w * J.transpose() * J;
+      const Eigen::Matrix<double, 9, 1> Jtr = w * J.transpose() * r;
+      info.block<6, 6>(kTheta, kTheta) += JtJ.topLeftCorner<6, 6>();
+      info.block<6, 3>(kTheta, o) += JtJ.topRightCorner<6, 3>();
+      info.block<3, 6>(o, kTheta) += JtJ.bottomLeftCorner<3, 6>();
+      info.block<3, 3>(o, o) += JtJ.bottomRightCorner<3, 3>();
+      rhs.segment<6>(kTheta) += Jtr.head<6>();
+      rhs.segment<3>(o) += Jtr.tail<3>();
+      *sq_sum += r.squaredNorm();
+      ++*count;
     }
   }
-  // Association gate at the prior: a plane whose macroblocks sit far outside
-  // the innovation covariance is a different surface under an old track id.
-  if (options_.association_gate > 0) {
-    const double extra2 = options_.extra_sigma_px * options_.extra_sigma_px;
-    std::set<size_t> failed;
-    for (const auto& [index, obs_ptr] : tracked) {
-      if (reidentified.count(obs_ptr)) continue;
-      const PlaneObservation& obs = *obs_ptr;
-      const int o = PlaneOffset(index);
-      Eigen::Matrix<double, 9, 9> P9;
-      P9.topLeftCorner<6, 6>() = P_.block<6, 6>(kTheta, kTheta);
-      P9.topRightCorner<6, 3>() = P_.block<6, 3>(kTheta, o);
-      P9.bottomLeftCorner<3, 6>() = P_.block<3, 6>(o, kTheta);
-      P9.bottomRightCorner<3, 3>() = P_.block<3, 3>(o, o);
-      std::vector<double> chi2;
-      for (size_t j = 0; j < obs.x_later_px.size(); ++j) {
-        Eigen::Vector2d z;
-        Eigen::Matrix<double, 2, 3> d_theta, d_t, d_pi;
-        if (!ObservePoint(K_, K_inv_, R_, t_, planes_[index].pi, obs.x_later_px[j], &z, &d_theta,
-                          &d_t, &d_pi)) {
-          chi2.push_back(1e9);
-          continue;
-        }
-        Eigen::Matrix<double, 2, 9> J;
-        J << d_theta, d_t, d_pi;
-        const Eigen::Matrix2d S =
-            J * P9 * J.transpose() + (obs.variance_px2[j] + extra2) * Eigen::Matrix2d::Identity();
-        const Eigen::Vector2d r = obs.x_earlier_px[j] - z;
-        chi2.push_back(r.dot(S.ldlt().solve(r)));
-      }
-      if (chi2.empty()) continue;
-      std::nth_element(chi2.begin(), chi2.begin() + chi2.size() / 2, chi2.end());
-      if (chi2[chi2.size() / 2] > options_.association_gate) failed.insert(index);
-    }
-    // Failed planes are dropped and all their observations start new ones.
-    for (auto f = failed.rbegin(); f != failed.rend(); ++f) {
-      const size_t index = *f;
-      RemovePlane(index);
-      ++rep.planes_reassociated;
-      for (size_t k = tracked.size(); k-- > 0;) {
-        if (tracked[k].first == index) {
-          fresh.push_back(tracked[k].second);
-          tracked.erase(tracked.begin() + static_cast<std::ptrdiff_t>(k));
-        } else if (tracked[k].first > index) {
-          --tracked[k].first;
-        }
-      }
-    }
+  if (const int road = RoadIndex(); road >= 0 && options_.road_height_rel_sigma > 0) {
+    const int o = PlaneOffset(static_cast<size_t>(road));
+    Eigen::RowVector3d d_t, d_pi;
+    const double r = -RoadHeightChange(planes_[road].pi, t_, &d_t, &d_pi);  // z = 0
+    const double w = 1.0 / (options_.road_height_rel_sigma * options_.road_height_rel_sigma);
+    info.block<3, 3>(kT, kT) += w * d_t.transpose() * d_t;
+    info.block<3, 3>(kT, o) += w * d_t.transpose() * d_pi;
+    info.block<3, 3>(o, kT) += w * d_pi.transpose() * d_t;
+    info.block<3, 3>(o, o) += w * d_pi.transpose() * d_pi;
+    rhs.segment<3>(kT) += w * r * d_t.transpose();
+    rhs.segment<3>(o) += w * r * d_pi.transpose();
   }
-  rep.skipped = tracked.empty();
-  if (!tracked.empty()) {
-    const int n = static_cast<int>(P_.rows());
-    Eigen::MatrixXd P_inv;
-    if (!InverseSpd(P_, &P_inv)) {
-      return InternalError("EKF prior covariance is not positive definite; update skipped");
-    }
-    const Eigen::Matrix3d R0 = R_;
-    const Eigen::Vector3d t0 = t_, w0 = w_, v0 = v_;
-    std::vector<Eigen::Vector3d> pi0;
-    for (const PlaneTrack& p : planes_) pi0.push_back(p.pi);
-    const double extra2 = options_.extra_sigma_px * options_.extra_sigma_px;
+}
 
-    Eigen::MatrixXd info;
-    for (int iter = 0; iter < std::max(1, options_.iterations); ++iter) {
-      // e = x - x_prior.
-      Eigen::VectorXd e(n);
-      e.segment<3>(kTheta) = LogSO3(R0.transpose() * R_);
-      e.segment<3>(kT) = t_ - t0;
-      e.segment<3>(kW) = w_ - w0;
-      e.segment<3>(kV) = v_ - v0;
-      for (size_t i = 0; i < planes_.size(); ++i)
-        e.segment<3>(PlaneOffset(i)) = planes_[i].pi - pi0[i];
-      info = P_inv;
-      Eigen::VectorXd rhs = -P_inv * e;
-      double sq_sum = 0;
-      int count = 0;
-      for (const auto& [index, obs] : tracked) {
-        const int o = PlaneOffset(index);
-        for (size_t j = 0; j < obs->x_later_px.size(); ++j) {
-          Eigen::Vector2d z;
-          Eigen::Matrix<double, 2, 9> J;
-          Eigen::Matrix<double, 2, 3> d_theta, d_t, d_pi;
-          if (!ObservePoint(K_, K_inv_, R_, t_, planes_[index].pi, obs->x_later_px[j], &z, &d_theta,
-                            &d_t, &d_pi)) {
-            continue;
-          }
-          J << d_theta, d_t, d_pi;
-          const Eigen::Vector2d r = obs->x_earlier_px[j] - z;
-          const double var = obs->variance_px2[j] + extra2;
-          double w = 1.0 / var;
-          const double norm_r = r.norm() / std::sqrt(var);
-          if (options_.huber_k > 0 && norm_r > options_.huber_k) w *= options_.huber_k / norm_r;
-          const Eigen::Matrix<double, 9, 9> JtJ = w * J.transpose() * J;
-          const Eigen::Matrix<double, 9, 1> Jtr = w * J.transpose() * r;
-          info.block<6, 6>(kTheta, kTheta) += JtJ.topLeftCorner<6, 6>();
-          info.block<6, 3>(kTheta, o) += JtJ.topRightCorner<6, 3>();
-          info.block<3, 6>(o, kTheta) += JtJ.bottomLeftCorner<3, 6>();
-          info.block<3, 3>(o, o) += JtJ.bottomRightCorner<3, 3>();
-          rhs.segment<6>(kTheta) += Jtr.head<6>();
-          rhs.segment<3>(o) += Jtr.tail<3>();
-          sq_sum += r.squaredNorm();
-          ++count;
-        }
-      }
-      rep.measurements = count;
-      // The road's constant height (road_height_rel_sigma): the camera stays
-      // at the same distance above the road, so the step moves along it,
-      //   c(t, pi_road) = pi_road^T t = 0  (n^T t / d: the step's height
-      //   change relative to the height),
-      // a scalar pseudo-measurement with dc/dt = pi_road^T, dc/dpi_road = t^T.
-      // It holds while the road is coasting too (PlaneTrack::missed_updates).
-      if (const int road = RoadIndex(); road >= 0 && options_.road_height_rel_sigma > 0) {
-        const int o = PlaneOffset(static_cast<size_t>(road));
-        Eigen::RowVector3d d_t, d_pi;
-        const double r = -RoadHeightChange(planes_[road].pi, t_, &d_t, &d_pi);  // z = 0
-        const double w = 1.0 / (options_.road_height_rel_sigma * options_.road_height_rel_sigma);
-        info.block<3, 3>(kT, kT) += w * d_t.transpose() * d_t;
-        info.block<3, 3>(kT, o) += w * d_t.transpose() * d_pi;
-        info.block<3, 3>(o, kT) += w * d_pi.transpose() * d_t;
-        info.block<3, 3>(o, o) += w * d_pi.transpose() * d_pi;
-        rhs.segment<3>(kT) += w * r * d_t.transpose();
-        rhs.segment<3>(o) += w * r * d_pi.transpose();
-      }
-      Eigen::LLT<Eigen::MatrixXd> llt(info);
-      if (llt.info() != Eigen::Success) {
-        R_ = R0, t_ = t0, w_ = w0, v_ = v0;
-        for (size_t i = 0; i < planes_.size(); ++i) planes_[i].pi = pi0[i];
-        return InternalError("EKF information matrix is not positive definite; update skipped");
-      }
-      const Eigen::VectorXd delta = llt.solve(rhs);
-      if (!delta.allFinite()) {
-        R_ = R0, t_ = t0, w_ = w0, v_ = v0;
-        for (size_t i = 0; i < planes_.size(); ++i) planes_[i].pi = pi0[i];
-        return InternalError("EKF update diverged (non-finite step); update skipped");
-      }
-      R_ = R_ * ExpSO3(delta.segment<3>(kTheta));
-      t_ += delta.segment<3>(kT);
-      w_ += delta.segment<3>(kW);
-      v_ += delta.segment<3>(kV);
-      for (size_t i = 0; i < planes_.size(); ++i) planes_[i].pi += delta.segment<3>(PlaneOffset(i));
-      rep.rms_residual_px = count > 0 ? std::sqrt(sq_sum / count) : 0.0;
-      if (delta.norm() < 1e-10) break;
-    }
-    Eigen::MatrixXd P_new;
-    if (!InverseSpd(info, &P_new)) {
-      return InternalError("EKF posterior covariance is not positive definite");
-    }
-    P_ = std::move(P_new);
-    Symmetrize(&P_);
-    // Scale gauge. Observations see t and pi only through t pi^T, so
-    // (t, v, pi) -> (s t, s v, pi / s) changes no prediction: the scale is
-    // unobservable, and linearisation errors let it run away (on simulated
-    // drives the step length grew 4x in 5 updates while the planes were
-    // tracked consistently). Static planes that the filter has already seen
-    // pin it: the update's common change of their |pi| (geometric mean over
-    // planes with >= pin_scale_min_observations) is undone by rescaling the
-    // whole state, so the update may move them relative to each other but
-    // not all together.
-    if (options_.pin_scale_min_observations > 0) {
-      // The planes that pin: the established road alone when it was observed
-      // (road_pins_scale: its distance is the one that stays constant), else
-      // every established plane.
-      std::set<size_t> pins;
-      for (const auto& [index, obs] : tracked) {
-        if (planes_[index].observations >= options_.pin_scale_min_observations &&
-            planes_[index].road && options_.road_pins_scale) {
-          pins.insert(index);
-        }
-      }
-      if (pins.empty()) {
-        for (const auto& [index, obs] : tracked) {
-          if (planes_[index].observations >= options_.pin_scale_min_observations) {
-            pins.insert(index);
-          }
-        }
-      }
-      double log_sum = 0;
-      int pinned = 0;
-      for (size_t index : pins) {
-        const double before = pi0[index].norm(), after = planes_[index].pi.norm();
-        if (!(before > 0 && after > 0)) continue;
-        log_sum += std::log(after / before);
-        ++pinned;
-      }
-      if (pinned > 0) {
-        // pi scaled by k = exp(mean log ratio): multiply lengths by k.
-        rep.scale_correction = std::exp(log_sum / pinned);
-        Rescale(rep.scale_correction);
-      }
-    }
-    std::set<size_t> updated;
-    for (const auto& [index, obs] : tracked) updated.insert(index);
-    for (size_t index : updated) ++planes_[index].observations;
-    rep.planes_updated = static_cast<int>(updated.size());
+// Iterated EKF in information form (file comment of plane_ekf.h): each
+// Gauss-Newton step solves
+//   (P-^-1 + sum_j H_j^T H_j / s_j^2) delta = sum_j H_j^T r_j / s_j^2 - P-^-1 e,
+// e = x - x-, and retracts x <- x (+) delta; P+ = (P-^-1 + sum H^T H / s^2)^-1.
+Status PlaneEkf::IteratedUpdate(const std::vector<TrackedObservation>& tracked,
+                                UpdateReport* rep, std::vector<Eigen::Vector3d>* pi0_out) {
+  const int n = static_cast<int>(P_.rows());
+  Eigen::MatrixXd P_inv;
+  if (!InverseSpd(P_, &P_inv)) {
+    return InternalError("EKF prior covariance is not positive definite; update skipped");
   }
-  // 3. Add the new planes with the updated motion.
-  for (const PlaneObservation* o : fresh) {
-    if (AddPlane(*o)) {
-      ++rep.planes_added;
-    } else {
-      ++rep.planes_rejected;
+  const Eigen::Matrix3d R0 = R_;
+  const Eigen::Vector3d t0 = t_, w0 = w_, v0 = v_;
+  std::vector<Eigen::Vector3d>& pi0 = *pi0_out;
+  pi0.clear();
+  for (const PlaneTrack& p : planes_) pi0.push_back(p.pi);
+  auto restore_prior = [&] {
+    R_ = R0, t_ = t0, w_ = w0, v_ = v0;
+    for (size_t i = 0; i < planes_.size(); ++i) planes_[i].pi = pi0[i];
+  };
+
+  Eigen::MatrixXd info;
+  for (int iter = 0; iter < std::max(1, options_.iterations); ++iter) {
+    // e = x - x_prior.
+    Eigen::VectorXd e(n);
+    e.segment<3>(kTheta) = LogSO3(R0.transpose() * R_);
+    e.segment<3>(kT) = t_ - t0;
+    e.segment<3>(kW) = w_ - w0;
+    e.segment<3>(kV) = v_ - v0;
+    for (size_t i = 0; i < planes_.size(); ++i)
+      e.segment<3>(PlaneOffset(i)) = planes_[i].pi - pi0[i];
+    info = P_inv;
+    Eigen::VectorXd rhs = -P_inv * e;
+    double sq_sum = 0;
+    int count = 0;
+    AccumulateMeasurements(tracked, &info, &rhs, &sq_sum, &count);
+    rep->measurements = count;
+    Eigen::LLT<Eigen::MatrixXd> llt(info);
+    if (llt.info() != Eigen::Success) {
+      restore_prior();
+      return InternalError("EKF information matrix is not positive definite; update skipped");
     }
+    const Eigen::VectorXd delta = llt.solve(rhs);
+    if (!delta.allFinite()) {
+      restore_prior();
+      return InternalError("EKF update diverged (non-finite step); update skipped");
+    }
+    R_ = R_ * ExpSO3(delta.segment<3>(kTheta));
+    t_ += delta.segment<3>(kT);
+    w_ += delta.segment<3>(kW);
+    v_ += delta.segment<3>(kV);
+    for (size_t i = 0; i < planes_.size(); ++i) planes_[i].pi += delta.segment<3>(PlaneOffset(i));
+    rep->rms_residual_px = count > 0 ? std::sqrt(sq_sum / count) : 0.0;
+    if (delta.norm() < 1e-10) break;
   }
+  Eigen::MatrixXd P_new;
+  if (!InverseSpd(info, &P_new)) {
+    return InternalError("EKF posterior covariance is not positive definite");
+  }
+  P_ = std::move(P_new);
+  Symmetrize(&P_);
   return Status::Ok();
+}
+
+// Scale gauge. Observations see t and pi only through t pi^T, so
+// (t, v, pi) -> (s t, s v, pi / s) changes no prediction: the scale is
+// unobservable, and linearisation errors let it run away (on simulated
+// drives the step length grew 4x in 5 updates while the planes were
+// tracked consistently). Static planes that the filter has already seen
+// pin it: the update's common change of their |pi| (geometric mean over
+// planes with >= pin_scale_min_observations) is undone by rescaling the
+// whole state, so the update may move them relative to each other but
+// not all together.
+void PlaneEkf::PinScale(const std::vector<TrackedObservation>& tracked,
+                        const std::vector<Eigen::Vector3d>& pi0, UpdateReport* rep) {
+  // The planes that pin: the established road alone when it was observed
+  // (road_pins_scale: its distance is the one that stays constant), else
+  // every established plane.
+  std::set<size_t> pins;
+  for (const auto& [index, obs] : tracked) {
+    if (planes_[index].observations >= options_.pin_scale_min_observations &&
+        planes_[index].road && options_.road_pins_scale) {
+      pins.insert(index);
+    }
+  }
+  if (pins.empty()) {
+    for (const auto& [index, obs] : tracked) {
+      if (planes_[index].observations >= options_.pin_scale_min_observations) {
+        pins.insert(index);
+      }
+    }
+  }
+  double log_sum = 0;
+  int pinned = 0;
+  for (size_t index : pins) {
+    const double before = pi0[index].norm(), after = planes_[index].pi.norm();
+    if (!(before > 0 && after > 0)) continue;
+    log_sum += std::log(after / before);
+    ++pinned;
+  }
+  if (pinned > 0) {
+    // pi scaled by k = exp(mean log ratio): multiply lengths by k.
+    rep->scale_correction = std::exp(log_sum / pinned);
+    Rescale(rep->scale_correction);
+  }
 }
 
 }  // namespace slapse

@@ -1,4 +1,4 @@
-// EKF over camera motion and planes (paper Sec. VI, ALGORITHM.md §5).
+// EKF over camera motion and planes (paper Sec. VI; docs/METHOD.md "EKF").
 //
 // Frames and conventions (one set, used everywhere in this file):
 //  - C_k is the camera frame at anchor k (x right, y down, z forward).
@@ -32,6 +32,9 @@
 #pragma once
 
 #include <map>
+#include <optional>
+#include <set>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -104,6 +107,8 @@ struct EkfOptions {
   // the camera height) with this standard deviation; 0 = off. 0.01: 1.5 cm
   // per step at 1.5 m (bumps, suspension).
   double road_height_rel_sigma = 0.01;
+  // (Road-like is the one road test of core/common/road.h with down = the
+  // camera's +y axis and road_max_angle_deg.)
 };
 
 // One plane's macroblock correspondences between the previous anchor and the
@@ -121,6 +126,8 @@ struct PlaneTrack {
   int observations = 0;                          // updates it took part in
   bool road = false;                             // the road plane (EkfOptions)
   int missed_updates = 0;  // consecutive updates without an observation (road only)
+  // Kept through the last update without an observation (only the road coasts).
+  bool coasting() const { return road && missed_updates > 0; }
 };
 
 // The nominal state: step motion, velocities and planes (n / d in C_k).
@@ -216,6 +223,34 @@ class PlaneEkf {
                    Eigen::Matrix<double, 3, 6>* JtWJm) const;
   bool IsRoadLike(const Eigen::Vector3d& pi) const;
   int RoadIndex() const;  // -1: none
+
+  // Update's steps (see Update). A tracked observation: the index of its
+  // plane in planes_ and the observation.
+  using TrackedObservation = std::pair<size_t, const PlaneObservation*>;
+  struct Association {
+    std::vector<TrackedObservation> tracked;   // of planes in the state
+    std::vector<const PlaneObservation*> fresh;  // to be added as new planes
+    std::set<const PlaneObservation*> reidentified;  // new ids taken as the road
+  };
+  // Maps observation ids through the road aliases, deletes (or coasts) the
+  // planes without an observation and splits the observations.
+  Association Associate(const std::vector<PlaneObservation>& observations, UpdateReport* rep);
+  void ReidentifyRoad(Association* a, UpdateReport* rep);
+  void GateAssociation(Association* a, UpdateReport* rep);
+  // Median over the observation's MBs of the squared Mahalanobis innovation
+  // against plane `index` (nullopt: no MB).
+  std::optional<double> MedianInnovation(size_t index, const PlaneObservation& obs) const;
+  // The iterated update with the tracked observations; on success P_ is the
+  // posterior and *pi0 holds the planes' prior pi.
+  Status IteratedUpdate(const std::vector<TrackedObservation>& tracked, UpdateReport* rep,
+                        std::vector<Eigen::Vector3d>* pi0);
+  // Adds the MB measurements (and the road-height pseudo-measurement) at the
+  // current estimate to the information matrix and right-hand side.
+  void AccumulateMeasurements(const std::vector<TrackedObservation>& tracked,
+                              Eigen::MatrixXd* info, Eigen::VectorXd* rhs, double* sq_sum,
+                              int* count) const;
+  void PinScale(const std::vector<TrackedObservation>& tracked,
+                const std::vector<Eigen::Vector3d>& pi0, UpdateReport* rep);
 
   Intrinsics intrinsics_;
   Eigen::Matrix3d K_, K_inv_;

@@ -1,5 +1,5 @@
 // A generic, deterministic RANSAC (in the shape of COLMAP's) with an optional
-// sampling subset, as SLAPSE's plane tracking needs (ALGORITHM.md §4).
+// sampling subset, as SLAPSE's plane tracking needs (paper Sec. V-C).
 //
 // An Estimator provides:
 //   using X_t = ...;  using Y_t = ...;  using M_t = ...;
@@ -75,6 +75,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <optional>
 #include <random>
 #include <type_traits>
 #include <utility>
@@ -188,71 +189,28 @@ class Ransac {
     constexpr int kSample = Estimator::kMinNumSamples;
     const int num_points = static_cast<int>(X.size());
     if (X.size() != Y.size() || !(options_.max_error > 0.0)) return report;
-
-    // The pool to sample from: distinct, in-range indices.
     std::vector<int> pool;
-    if (sample_from == nullptr) {
-      pool.resize(num_points);
-      for (int i = 0; i < num_points; ++i) pool[i] = i;
-    } else {
-      pool = *sample_from;
-      for (int i : pool) {
-        if (i < 0 || i >= num_points) return report;
-      }
-      std::sort(pool.begin(), pool.end());
-      pool.erase(std::unique(pool.begin(), pool.end()), pool.end());
-    }
+    if (!MakePool(num_points, sample_from, &pool)) return report;
     const int pool_size = static_cast<int>(pool.size());
     if (pool_size < kSample) return report;
     if (neighbours != nullptr && neighbours->size() != X.size()) return report;
-
-    // Local sampling: each pool point's neighbours within the pool, flattened
-    // (point pool[k]'s are local_nb[local_begin[k] .. local_begin[k + 1])).
-    std::vector<int> local_begin, local_nb, scratch;
-    std::vector<char> in_pool;
-    if (neighbours != nullptr) {
-      in_pool.assign(num_points, 0);
-      for (int i : pool) in_pool[i] = 1;
-      local_begin.reserve(pool_size + 1);
-      for (int i : pool) {
-        local_begin.push_back(static_cast<int>(local_nb.size()));
-        for (int j : (*neighbours)[i]) {
-          if (j >= 0 && j < num_points && j != i && in_pool[j]) local_nb.push_back(j);
-        }
-      }
-      local_begin.push_back(static_cast<int>(local_nb.size()));
-    }
+    const std::optional<LocalNeighbours> local =
+        neighbours != nullptr ? std::optional<LocalNeighbours>(
+                                    MakeLocalNeighbours(pool, *neighbours, num_points))
+                              : std::nullopt;
 
     const double max_sq_error = options_.max_error * options_.max_error;
     const int min_trials = std::max(0, options_.min_num_trials);
     const int max_trials = std::max(min_trials, options_.max_num_trials);
-
     const internal::ScorerFor<Estimator> scorer(X, Y);
     std::mt19937_64 rng(options_.seed);
     std::vector<X_t> sample_x(kSample);
     std::vector<Y_t> sample_y(kSample);
+    std::vector<int> scratch;
     std::vector<M_t> models;
-    std::vector<double> residuals;
-
-    // Pre-test set: distinct random points, by a generator of its own.
-    std::vector<int> test_index;
-    std::vector<X_t> test_x;
-    std::vector<Y_t> test_y;
-    std::vector<double> test_residuals;
-    const bool pretest = options_.pretest_points > 0 && num_points >= 2 * options_.pretest_points;
-    if (pretest) {
-      std::mt19937_64 test_rng(options_.seed ^ 0x5DEECE66Dull);
-      std::vector<int> all(num_points);
-      for (int i = 0; i < num_points; ++i) all[i] = i;
-      for (int s = 0; s < options_.pretest_points; ++s) {
-        const int j = s + static_cast<int>(internal::UniformIndex(test_rng, num_points - s));
-        std::swap(all[s], all[j]);
-        test_index.push_back(all[s]);
-        test_x.push_back(X[all[s]]);
-        test_y.push_back(Y[all[s]]);
-      }
-    }
-    const internal::ScorerFor<Estimator> test_scorer(test_x, test_y);
+    std::vector<double> residuals, test_residuals;
+    const Pretest test = MakePretest(X, Y);
+    const internal::ScorerFor<Estimator> test_scorer(test.x, test.y);
     int best_test_inliers = 0;
 
     double best_cost = std::numeric_limits<double>::infinity();
@@ -261,46 +219,11 @@ class Ransac {
     int trial = 0;
     for (; trial < max_trials; ++trial) {
       if (trial >= min_trials && trial >= dynamic_max_trials) break;
-      if (neighbours == nullptr) {
-        // Partial Fisher-Yates: pool[0..kSample) becomes a uniform random sample
-        // (valid from any current order of the pool).
-        for (int s = 0; s < kSample; ++s) {
-          const int j = s + static_cast<int>(internal::UniformIndex(rng, pool_size - s));
-          std::swap(pool[s], pool[j]);
-          sample_x[s] = X[pool[s]];
-          sample_y[s] = Y[pool[s]];
-        }
-      } else {
-        // The pool keeps its order here: local_begin is indexed by position.
-        const int k = static_cast<int>(internal::UniformIndex(rng, pool_size));
-        const int num_nb = local_begin[k + 1] - local_begin[k];
-        sample_x[0] = X[pool[k]];
-        sample_y[0] = Y[pool[k]];
-        if (num_nb >= kSample - 1) {
-          scratch.assign(local_nb.begin() + local_begin[k], local_nb.begin() + local_begin[k + 1]);
-          for (int s = 0; s < kSample - 1; ++s) {
-            const int j = s + static_cast<int>(internal::UniformIndex(rng, num_nb - s));
-            std::swap(scratch[s], scratch[j]);
-            sample_x[s + 1] = X[scratch[s]];
-            sample_y[s + 1] = Y[scratch[s]];
-          }
-        } else {
-          // An isolated point: the rest of the sample from the whole pool
-          // (distinct positions, by rejection).
-          scratch.assign(1, k);
-          while (static_cast<int>(scratch.size()) < kSample) {
-            const int j = static_cast<int>(internal::UniformIndex(rng, pool_size));
-            if (std::find(scratch.begin(), scratch.end(), j) != scratch.end()) continue;
-            sample_x[scratch.size()] = X[pool[j]];
-            sample_y[scratch.size()] = Y[pool[j]];
-            scratch.push_back(j);
-          }
-        }
-      }
+      DrawSample(X, Y, local ? &*local : nullptr, &rng, &pool, &scratch, &sample_x, &sample_y);
       models.clear();
       Estimator::Estimate(sample_x, sample_y, &models);
       for (const M_t& model : models) {
-        if (pretest && best_test_inliers >= options_.pretest_min_best_inliers) {
+        if (test.active && best_test_inliers >= options_.pretest_min_best_inliers) {
           test_scorer.Residuals(model, &test_residuals);
           if (CountInliers(test_residuals, max_sq_error) <
               options_.pretest_min_ratio * best_test_inliers) {
@@ -320,40 +243,11 @@ class Ransac {
         best_cost = cost;
         best_support = CountInliers(residuals, max_sq_error);
         best_test_inliers = 0;
-        for (int i : test_index) best_test_inliers += residuals[i] <= max_sq_error ? 1 : 0;
-        if (neighbours == nullptr) {
-          int pool_inliers = 0;
-          for (int i : pool) pool_inliers += residuals[i] <= max_sq_error ? 1 : 0;
-          dynamic_max_trials =
-              internal::RansacNumTrials(static_cast<double>(pool_inliers) / pool_size, kSample,
-                                        options_.confidence, min_trials, max_trials);
-        } else {
-          // p(all-inlier local sample), see the file comment; as a "ratio"
-          // with sample size 1.
-          int pool_inliers = 0;
-          for (int i : pool) pool_inliers += residuals[i] <= max_sq_error ? 1 : 0;
-          double p_sum = 0.0;
-          for (int k = 0; k < pool_size; ++k) {
-            if (!(residuals[pool[k]] <= max_sq_error)) continue;
-            int b = local_begin[k + 1] - local_begin[k];
-            int a = 0;
-            if (b >= kSample - 1) {
-              for (int q = local_begin[k]; q < local_begin[k + 1]; ++q) {
-                a += residuals[local_nb[q]] <= max_sq_error ? 1 : 0;
-              }
-            } else {  // isolated: the rest from the pool
-              b = pool_size - 1;
-              a = pool_inliers - 1;
-            }
-            double prod = 1.0;
-            for (int s = 0; s < kSample - 1; ++s) {
-              prod *= static_cast<double>(std::max(0, a - s)) / (b - s);
-            }
-            p_sum += prod;
-          }
-          dynamic_max_trials = internal::RansacNumTrials(p_sum / pool_size, 1, options_.confidence,
-                                                         min_trials, max_trials);
-        }
+        for (int i : test.index) best_test_inliers += residuals[i] <= max_sq_error ? 1 : 0;
+        dynamic_max_trials = local ? LocalNumTrials(residuals, pool, *local, max_sq_error,
+                                                    min_trials, max_trials)
+                                   : UniformNumTrials(residuals, pool, max_sq_error, min_trials,
+                                                      max_trials);
       }
     }
     report.num_trials = trial;
@@ -395,6 +289,166 @@ class Ransac {
   }
 
  private:
+  // Local sampling: each pool point's neighbours within the pool, flattened
+  // (point pool[k]'s are nb[begin[k] .. begin[k + 1])).
+  struct LocalNeighbours {
+    std::vector<int> begin, nb;
+  };
+  // The pre-test set (RansacOptions::pretest_points): distinct random points.
+  struct Pretest {
+    bool active = false;
+    std::vector<int> index;
+    std::vector<X_t> x;
+    std::vector<Y_t> y;
+  };
+
+  // The pool to sample from: all points, or the distinct indices of
+  // `sample_from` (false when one is out of range).
+  static bool MakePool(int num_points, const std::vector<int>* sample_from,
+                       std::vector<int>* pool_out) {
+    std::vector<int>& pool = *pool_out;
+    if (sample_from == nullptr) {
+      pool.resize(num_points);
+      for (int i = 0; i < num_points; ++i) pool[i] = i;
+      return true;
+    }
+    pool = *sample_from;
+    for (int i : pool) {
+      if (i < 0 || i >= num_points) return false;
+    }
+    std::sort(pool.begin(), pool.end());
+    pool.erase(std::unique(pool.begin(), pool.end()), pool.end());
+    return true;
+  }
+
+  static LocalNeighbours MakeLocalNeighbours(const std::vector<int>& pool,
+                                             const std::vector<std::vector<int>>& neighbours,
+                                             int num_points) {
+    LocalNeighbours local;
+    std::vector<char> in_pool(num_points, 0);
+    for (int i : pool) in_pool[i] = 1;
+    local.begin.reserve(pool.size() + 1);
+    for (int i : pool) {
+      local.begin.push_back(static_cast<int>(local.nb.size()));
+      for (int j : neighbours[i]) {
+        if (j >= 0 && j < num_points && j != i && in_pool[j]) local.nb.push_back(j);
+      }
+    }
+    local.begin.push_back(static_cast<int>(local.nb.size()));
+    return local;
+  }
+
+  // Pre-test set: distinct random points, by a generator of its own.
+  Pretest MakePretest(const std::vector<X_t>& X, const std::vector<Y_t>& Y) const {
+    Pretest test;
+    const int num_points = static_cast<int>(X.size());
+    test.active = options_.pretest_points > 0 && num_points >= 2 * options_.pretest_points;
+    if (!test.active) return test;
+    std::mt19937_64 test_rng(options_.seed ^ 0x5DEECE66Dull);
+    std::vector<int> all(num_points);
+    for (int i = 0; i < num_points; ++i) all[i] = i;
+    for (int s = 0; s < options_.pretest_points; ++s) {
+      const int j = s + static_cast<int>(internal::UniformIndex(test_rng, num_points - s));
+      std::swap(all[s], all[j]);
+      test.index.push_back(all[s]);
+      test.x.push_back(X[all[s]]);
+      test.y.push_back(Y[all[s]]);
+    }
+    return test;
+  }
+
+  // A minimal sample into sample_x/y: uniform from the pool, or (local) a
+  // uniform pool point and the rest from its neighbours (see the file comment).
+  static void DrawSample(const std::vector<X_t>& X, const std::vector<Y_t>& Y,
+                         const LocalNeighbours* local, std::mt19937_64* rng,
+                         std::vector<int>* pool_io, std::vector<int>* scratch_io,
+                         std::vector<X_t>* sample_x_out, std::vector<Y_t>* sample_y_out) {
+    constexpr int kSample = Estimator::kMinNumSamples;
+    std::vector<int>& pool = *pool_io;
+    std::vector<int>& scratch = *scratch_io;
+    std::vector<X_t>& sample_x = *sample_x_out;
+    std::vector<Y_t>& sample_y = *sample_y_out;
+    const int pool_size = static_cast<int>(pool.size());
+    if (local == nullptr) {
+      // Partial Fisher-Yates: pool[0..kSample) becomes a uniform random sample
+      // (valid from any current order of the pool).
+      for (int s = 0; s < kSample; ++s) {
+        const int j = s + static_cast<int>(internal::UniformIndex(*rng, pool_size - s));
+        std::swap(pool[s], pool[j]);
+        sample_x[s] = X[pool[s]];
+        sample_y[s] = Y[pool[s]];
+      }
+      return;
+    }
+    // The pool keeps its order here: local->begin is indexed by position.
+    const int k = static_cast<int>(internal::UniformIndex(*rng, pool_size));
+    const int num_nb = local->begin[k + 1] - local->begin[k];
+    sample_x[0] = X[pool[k]];
+    sample_y[0] = Y[pool[k]];
+    if (num_nb >= kSample - 1) {
+      scratch.assign(local->nb.begin() + local->begin[k], local->nb.begin() + local->begin[k + 1]);
+      for (int s = 0; s < kSample - 1; ++s) {
+        const int j = s + static_cast<int>(internal::UniformIndex(*rng, num_nb - s));
+        std::swap(scratch[s], scratch[j]);
+        sample_x[s + 1] = X[scratch[s]];
+        sample_y[s + 1] = Y[scratch[s]];
+      }
+      return;
+    }
+    // An isolated point: the rest of the sample from the whole pool
+    // (distinct positions, by rejection).
+    scratch.assign(1, k);
+    while (static_cast<int>(scratch.size()) < kSample) {
+      const int j = static_cast<int>(internal::UniformIndex(*rng, pool_size));
+      if (std::find(scratch.begin(), scratch.end(), j) != scratch.end()) continue;
+      sample_x[scratch.size()] = X[pool[j]];
+      sample_y[scratch.size()] = Y[pool[j]];
+      scratch.push_back(j);
+    }
+  }
+
+  // The adaptive trial count for uniform samples from the pool's inlier ratio.
+  int UniformNumTrials(const std::vector<double>& residuals, const std::vector<int>& pool,
+                       double max_sq_error, int min_trials, int max_trials) const {
+    int pool_inliers = 0;
+    for (int i : pool) pool_inliers += residuals[i] <= max_sq_error ? 1 : 0;
+    return internal::RansacNumTrials(static_cast<double>(pool_inliers) / pool.size(),
+                                     Estimator::kMinNumSamples, options_.confidence, min_trials,
+                                     max_trials);
+  }
+
+  // The adaptive trial count for local samples: p(all-inlier local sample),
+  // see the file comment, as a "ratio" with sample size 1.
+  int LocalNumTrials(const std::vector<double>& residuals, const std::vector<int>& pool,
+                     const LocalNeighbours& local, double max_sq_error, int min_trials,
+                     int max_trials) const {
+    constexpr int kSample = Estimator::kMinNumSamples;
+    const int pool_size = static_cast<int>(pool.size());
+    int pool_inliers = 0;
+    for (int i : pool) pool_inliers += residuals[i] <= max_sq_error ? 1 : 0;
+    double p_sum = 0.0;
+    for (int k = 0; k < pool_size; ++k) {
+      if (!(residuals[pool[k]] <= max_sq_error)) continue;
+      int b = local.begin[k + 1] - local.begin[k];
+      int a = 0;
+      if (b >= kSample - 1) {
+        for (int q = local.begin[k]; q < local.begin[k + 1]; ++q) {
+          a += residuals[local.nb[q]] <= max_sq_error ? 1 : 0;
+        }
+      } else {  // isolated: the rest from the pool
+        b = pool_size - 1;
+        a = pool_inliers - 1;
+      }
+      double prod = 1.0;
+      for (int s = 0; s < kSample - 1; ++s) {
+        prod *= static_cast<double>(std::max(0, a - s)) / (b - s);
+      }
+      p_sum += prod;
+    }
+    return internal::RansacNumTrials(p_sum / pool_size, 1, options_.confidence, min_trials,
+                                     max_trials);
+  }
+
   // The inlier mask and support of report.model; success iff the support is
   // at least kMinNumSamples.
   static void Finish(const internal::ScorerFor<Estimator>& scorer, int num_points,

@@ -80,6 +80,57 @@ Eigen::Matrix<double, 3, 2> TangentBasis(const Eigen::Vector3d& t) {
   return basis;
 }
 
+namespace {
+
+// One Levenberg-Marquardt step on sum r_i^2 over the selected points: the
+// Gauss-Newton system H = sum J^T J, g = sum J^T r with J = dr/dE dE/d(theta,
+// delta), damped (A = H + lambda diag(H)) until the step lowers the cost, up
+// to 6 times. True when a step was taken (R, t and lambda updated).
+bool LevenbergMarquardtStep(const std::vector<Eigen::Vector3d>& rays_earlier,
+                            const std::vector<Eigen::Vector3d>& rays_later,
+                            const std::vector<char>& selected, Eigen::Matrix3d* R_io,
+                            Eigen::Vector3d* t_io, double* lambda_io) {
+  Eigen::Matrix3d& R = *R_io;
+  Eigen::Vector3d& t = *t_io;
+  double& lambda = *lambda_io;
+  const size_t n = rays_earlier.size();
+  const Eigen::Matrix<double, 3, 2> basis = TangentBasis(t);
+  const Eigen::Matrix<double, 9, 5> dE_dp = EssentialJacobian(R, t, basis);
+  const Eigen::Matrix3d E_now = Skew(t) * R;
+  Eigen::Matrix<double, 5, 5> H = Eigen::Matrix<double, 5, 5>::Zero();
+  Eigen::Matrix<double, 5, 1> g = Eigen::Matrix<double, 5, 1>::Zero();
+  double cost = 0.0;
+  Eigen::Matrix<double, 1, 9> d_r_d_E;
+  for (size_t i = 0; i < n; ++i) {
+    if (!selected[i]) continue;
+    const double r = SampsonDistance(E_now, rays_earlier[i], rays_later[i], &d_r_d_E);
+    const Eigen::Matrix<double, 1, 5> J = d_r_d_E * dE_dp;
+    H.noalias() += J.transpose() * J;
+    g.noalias() += J.transpose() * r;
+    cost += r * r;
+  }
+  for (int attempt = 0; attempt < 6; ++attempt) {
+    Eigen::Matrix<double, 5, 5> A = H;
+    A.diagonal() += lambda * H.diagonal() + Eigen::Matrix<double, 5, 1>::Constant(1e-15);
+    const Eigen::Matrix<double, 5, 1> delta = A.ldlt().solve(-g);
+    if (!delta.allFinite()) return false;
+    const Eigen::Matrix3d R_new = R * ExpSO3(delta.head<3>());
+    const Eigen::Vector3d t_new = (t + basis * delta.tail<2>()).normalized();
+    const double new_cost =
+        MaskedCost(rays_earlier, rays_later, Eigen::Matrix3d(Skew(t_new) * R_new), selected);
+    if (new_cost < cost) {
+      R = R_new;
+      t = t_new;
+      lambda = std::max(1e-10, 0.1 * lambda);
+      return true;
+    }
+    lambda *= 10.0;
+  }
+  return false;
+}
+
+}  // namespace
+
 RelativePoseRefineReport RefineRelativePose(const std::vector<Eigen::Vector3d>& rays_earlier,
                                             const std::vector<Eigen::Vector3d>& rays_later,
                                             const Rigid3d& initial_later_from_earlier,
@@ -113,43 +164,8 @@ RelativePoseRefineReport RefineRelativePose(const std::vector<Eigen::Vector3d>& 
 
     double lambda = 1e-4;
     for (int step = 0; step < options.steps_per_stage; ++step) {
-      // Gauss-Newton system over the selected points.
-      const Eigen::Matrix<double, 3, 2> basis = TangentBasis(t);
-      const Eigen::Matrix<double, 9, 5> dE_dp = EssentialJacobian(R, t, basis);
-      const Eigen::Matrix3d E_now = Skew(t) * R;
-      Eigen::Matrix<double, 5, 5> H = Eigen::Matrix<double, 5, 5>::Zero();
-      Eigen::Matrix<double, 5, 1> g = Eigen::Matrix<double, 5, 1>::Zero();
-      double cost = 0.0;
-      Eigen::Matrix<double, 1, 9> d_r_d_E;
-      for (size_t i = 0; i < n; ++i) {
-        if (!selected[i]) continue;
-        const double r = SampsonDistance(E_now, rays_earlier[i], rays_later[i], &d_r_d_E);
-        const Eigen::Matrix<double, 1, 5> J = d_r_d_E * dE_dp;
-        H.noalias() += J.transpose() * J;
-        g.noalias() += J.transpose() * r;
-        cost += r * r;
-      }
-      // Levenberg-Marquardt: damp until the step lowers the cost.
-      bool accepted = false;
-      for (int attempt = 0; attempt < 6 && !accepted; ++attempt) {
-        Eigen::Matrix<double, 5, 5> A = H;
-        A.diagonal() += lambda * H.diagonal() + Eigen::Matrix<double, 5, 1>::Constant(1e-15);
-        const Eigen::Matrix<double, 5, 1> delta = A.ldlt().solve(-g);
-        if (!delta.allFinite()) break;
-        const Eigen::Matrix3d R_new = R * ExpSO3(delta.head<3>());
-        const Eigen::Vector3d t_new = (t + basis * delta.tail<2>()).normalized();
-        const double new_cost =
-            MaskedCost(rays_earlier, rays_later, Eigen::Matrix3d(Skew(t_new) * R_new), selected);
-        if (new_cost < cost) {
-          R = R_new;
-          t = t_new;
-          lambda = std::max(1e-10, 0.1 * lambda);
-          accepted = true;
-        } else {
-          lambda *= 10.0;
-        }
-      }
-      if (!accepted) break;  // at a minimum of this stage's cost
+      // At a minimum of this stage's cost: no step is accepted.
+      if (!LevenbergMarquardtStep(rays_earlier, rays_later, selected, &R, &t, &lambda)) break;
     }
   }
   if (!R.allFinite() || !t.allFinite()) return report;

@@ -11,6 +11,7 @@
 #include "core/common/timing.h"
 #include "core/estimators/epipolar_plane.h"
 #include "core/mv/mv_reader.h"
+#include "core/pipeline/front_end.h"
 
 namespace slapse {
 namespace {
@@ -185,10 +186,10 @@ StatusOr<ExtractionStats> EvaluateExtraction(const std::string& drive_dir,
   if (!gt.ok()) return gt.status();
   auto reader = MvReader::Open(VideoOf(drive_dir));
   if (!reader.ok()) return reader.status();
-  SegmentMerger merger(gt->intrinsics.width_px, gt->intrinsics.height_px,
-                       (*reader)->info().mv_sigma_px(), options.merge);
-  PlaneExtractor extractor(options.extraction);
-  InfinityPriorTracker prior_tracker;
+  // The pipeline's front end (merge, motion with its prior, threshold,
+  // extraction); a failed motion or extraction ends the evaluation.
+  FrontEnd front_end(gt->intrinsics, (*reader)->info().mv_sigma_px(),
+                     {options.merge, options.infinity, options.extraction});
   ExtractionStats stats;
   std::optional<AnchorPair> prev_pair;
   std::optional<InfinityResult> prev_inf;
@@ -198,21 +199,16 @@ StatusOr<ExtractionStats> EvaluateExtraction(const std::string& drive_dir,
     if (frame.index >= static_cast<int64_t>(gt->frames.size())) {
       return FailedPreconditionError("the video has more frames than its ground truth");
     }
-    auto t0 = std::chrono::steady_clock::now();
-    std::optional<AnchorPair> pair = merger.Push(frame);
-    if (!pair.has_value()) continue;
-    stats.merge_ms += MsSince(t0);
-    t0 = std::chrono::steady_clock::now();
-    // As the pipeline: the previous pair's motion seeds this pair's.
-    auto inf = ThresholdInfinity(pair->correspondences, gt->intrinsics, options.infinity,
-                                 prior_tracker.PriorFor(*pair));
-    prior_tracker.Record(*pair, inf.ok() ? &*inf : nullptr);
-    stats.threshold_ms += MsSince(t0);
-    if (!inf.ok()) return inf.status();
-    t0 = std::chrono::steady_clock::now();
-    auto extraction = extractor.Process(*pair, *inf, gt->intrinsics);
-    stats.fit_ms += MsSince(t0);
-    if (!extraction.ok()) return extraction.status();
+    std::optional<FrontEndStep> step = front_end.Push(frame);
+    if (!step.has_value()) continue;
+    stats.merge_ms += step->times.merge_ms;
+    stats.threshold_ms += step->times.threshold_ms;
+    if (!step->infinity.ok()) return step->infinity.status();
+    stats.fit_ms += step->times.fit_ms;
+    if (!step->extraction.ok()) return step->extraction.status();
+    const AnchorPair* pair = &step->pair;
+    const InfinityResult* inf = &*step->infinity;
+    const PlaneExtractionResult* extraction = &*step->extraction;
     const PairPlaneEvaluation ev = EvaluatePlanes(*pair, extraction->planes, *gt, options.truth);
     if (options.planes_csv != nullptr) {
       // The pair's estimated motion against the truth: rotation error and the
@@ -228,7 +224,7 @@ StatusOr<ExtractionStats> EvaluateExtraction(const std::string& drive_dir,
       // The extractor's learnt vertical against the true one (later camera frame).
       const Eigen::Vector3d true_down =
           gt->frames[pair->later_index].world_from_cam.R().transpose() * Eigen::Vector3d(0, 0, -1);
-      const double vertical_err_deg = AngleDeg(extractor.vertical_down(), true_down);
+      const double vertical_err_deg = AngleDeg(front_end.vertical_down(), true_down);
       for (size_t k = 0; k < ev.matches.size(); ++k) {
         const PlaneMatch& m = ev.matches[k];
         const ExtractedPlane& p = extraction->planes[k];
@@ -254,7 +250,7 @@ StatusOr<ExtractionStats> EvaluateExtraction(const std::string& drive_dir,
             p.m_later ? std::abs(p.m_later->y()) / p.m_later->norm() : -1.0, rot_err_deg,
             dir_err_deg, vertical_err_deg,
             p.m_later ? std::abs(p.m_later->dot(true_down)) / p.m_later->norm() : -1.0,
-            p.m_later ? std::abs(p.m_later->dot(extractor.vertical_down())) / p.m_later->norm()
+            p.m_later ? std::abs(p.m_later->dot(front_end.vertical_down())) / p.m_later->norm()
                       : -1.0);
       }
     }

@@ -9,15 +9,10 @@
 
 #include "core/common/rigid3.h"
 #include "core/common/status.h"
+#include "core/common/timed_pose.h"
 #include "core/sim/ground_truth.h"
 
 namespace slapse {
-
-struct TimedPose {
-  int64_t index = -1;  // frame index shared by the estimate and the truth
-  double timestamp_s = 0.0;
-  Rigid3d world_from_cam;
-};
 
 // Similarity transform b_from_a: x_b = s R x_a + t.
 struct Sim3d {

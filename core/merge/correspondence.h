@@ -1,5 +1,5 @@
 // Correspondences between two consecutive anchor frames, built by merging the
-// motion vectors of a GOP segment (ALGORITHM.md §2-3).
+// motion vectors of a GOP segment (paper Sec. V-A, V-B; docs/METHOD.md "MV merging").
 //
 // Frames: anchors k ("earlier") and k+1 ("later") in display order. Each
 // correspondence belongs to one 16x16 macroblock cell of the later anchor:
@@ -22,7 +22,7 @@ struct Correspondence {
   Eigen::Vector2d x_later_px = Eigen::Vector2d::Zero();    // MB centre in anchor k+1
   Eigen::Vector2d x_earlier_px = Eigen::Vector2d::Zero();  // matching point in anchor k
   // Per-axis variance of the merged MV given the number of in-line MVs merged
-  // (isotropic: covariance = variance_px2 * I). sigma^2/(...) per ALGORITHM.md §2.
+  // (isotropic: covariance = variance_px2 * I). Lemma 2, docs/METHOD.md "MV merging".
   double variance_px2 = 0.0;
   int mb_index = -1;   // row-major macroblock index in the later anchor
   int n_direct = 0;    // direct MVs merged (0 or 1)

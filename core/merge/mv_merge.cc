@@ -4,6 +4,8 @@
 #include <cmath>
 #include <tuple>
 
+#include "core/common/mb_grid.h"
+
 namespace slapse {
 namespace {
 
@@ -115,8 +117,8 @@ std::optional<MergedMv> MergeCell(const std::vector<MvCandidate>& candidates, do
 SegmentMerger::SegmentMerger(int width_px, int height_px, double sigma_px, MergeOptions options)
     : width_px_(width_px),
       height_px_(height_px),
-      mb_cols_((width_px + 15) / 16),
-      mb_rows_((height_px + 15) / 16),
+      mb_cols_(MbCount(width_px)),
+      mb_rows_(MbCount(height_px)),
       sigma_px_(sigma_px),
       options_(options) {}
 
@@ -127,10 +129,9 @@ void SegmentMerger::Reset() {
 }
 
 int SegmentMerger::CellOf(const Eigen::Vector2d& x_px) const {
-  // Cell (col, row) covers pixels 16*col .. 16*col + 15, i.e. coordinates
-  // [16*col - 0.5, 16*col + 15.5) in the pixel-centre convention.
-  const int col = static_cast<int>(std::floor((x_px.x() + 0.5) / 16.0));
-  const int row = static_cast<int>(std::floor((x_px.y() + 0.5) / 16.0));
+  // The MB grid of core/common/mb_grid.h.
+  const MbCell cell = MbCellOfPixel(x_px);
+  const int col = cell.col, row = cell.row;
   if (col < 0 || row < 0 || col >= mb_cols_ || row >= mb_rows_) return -1;
   if (x_px.x() > width_px_ - 0.5 || x_px.y() > height_px_ - 0.5) return -1;
   return row * mb_cols_ + col;
@@ -171,7 +172,7 @@ bool SegmentMerger::ChainLookup(const std::vector<const Correspondence*>& by_cel
   // Displacement field D(c) = start(c) - later(c) on the cells of the chain's
   // last anchor, interpolated bilinearly between the four cell centres around
   // x; where one of them is empty, the cell containing x alone.
-  const double u = (x.x() - 7.5) / 16.0, v = (x.y() - 7.5) / 16.0;
+  const double u = (x.x() - MbCentrePx(0)) / kMbSizePx, v = (x.y() - MbCentrePx(0)) / kMbSizePx;
   const int c0 = static_cast<int>(std::floor(u)), r0 = static_cast<int>(std::floor(v));
   const double fu = u - c0, fv = v - r0;
   Eigen::Vector2d disp = Eigen::Vector2d::Zero();

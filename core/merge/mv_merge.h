@@ -1,4 +1,4 @@
-// MV merging across a GOP segment (paper Sec. V-A, ALGORITHM.md §2).
+// MV merging across a GOP segment (paper Sec. V-A; docs/METHOD.md "MV merging").
 //
 // Between consecutive anchors k (earlier) and k+1 (later) a macroblock cell c
 // of k+1 collects candidate correspondences:
@@ -14,7 +14,7 @@
 // are merged with inverse-variance weights (2 for direct, 1 for indirect).
 //
 // Where this differs from the paper, and why:
-//  - Weights 2:1 (inverse variances), not sqrt(2):1 (ALGORITHM.md §2).
+//  - Weights 2:1 (inverse variances), not sqrt(2):1 (docs/METHOD.md "MV merging").
 //  - Indirect candidates start at y + g, up to 8 px from the cell centre. The
 //    paper files their displacement at the centre, which on a near road (flow
 //    gradients of 0.2-0.5 px/px over a segment) costs pixels. We merge start
@@ -40,7 +40,7 @@ struct MergeOptions {
   bool use_direct = true;
   bool use_indirect = true;
   // IPPP streams (no B frames, one frame between anchors) have too little
-  // parallax per segment (ALGORITHM.md §7): P-frame vector fields are chained
+  // parallax per segment (docs/METHOD.md "Beyond the paper"): P-frame vector fields are chained
   // (composed, interpolating the earlier field bilinearly between macroblock
   // cells) until the anchors are at least this many frames apart, and one
   // pair is emitted per chain. Segments with B frames are never chained.

@@ -1,8 +1,11 @@
 #include "core/pipeline/pipeline.h"
 
-#include <chrono>
+#include <algorithm>
 #include <cmath>
+#include <utility>
 
+#include "core/common/plane.h"
+#include "core/common/road.h"
 #include "core/common/timing.h"
 
 namespace slapse {
@@ -10,64 +13,11 @@ namespace {
 
 constexpr size_t kMaxSupportPointsPerPlane = 4000;
 
-}  // namespace
-
-Pipeline::Pipeline(const Intrinsics& intrinsics, double sigma_px, PipelineOptions options)
-    : intrinsics_(intrinsics),
-      options_(options),
-      merger_(intrinsics.width_px, intrinsics.height_px, sigma_px, options.merge),
-      extractor_(options.extraction),
-      ekf_(intrinsics, options.ekf) {}
-
-StatusOr<std::optional<PipelineStep>> Pipeline::Push(const FrameRecord& frame) {
-  if (frame.index <= last_index_) {
-    return InvalidArgumentError("frame " + std::to_string(frame.index) + " after frame " +
-                                std::to_string(last_index_) +
-                                ": frames must come in display order");
-  }
-  last_index_ = frame.index;
-  const auto t0 = std::chrono::steady_clock::now();
-  std::optional<AnchorPair> pair = merger_.Push(frame);
-  if (!pair.has_value()) return std::optional<PipelineStep>();
-  const double merge_ms = MsSince(t0);
-  PipelineStep step = Process(*pair);
-  step.times.merge_ms = merge_ms;
-  return std::optional<PipelineStep>(std::move(step));
-}
-
-void Pipeline::Break() {
-  merger_.Reset();
-  extractor_.Reset();
-  prior_tracker_.Reset();
-  ekf_ = PlaneEkf(intrinsics_, options_.ekf);
-}
-
-PipelineStep Pipeline::Process(const AnchorPair& pair) {
-  PipelineStep step;
-  step.earlier_index = pair.earlier_index;
-  step.later_index = pair.later_index;
-  step.timestamp_s = pair.later_timestamp_s;
-  step.segment = pair.type;
-  step.correspondences = static_cast<int>(pair.correspondences.size());
-  const double dt_s = pair.later_timestamp_s - pair.earlier_timestamp_s;
-
-  // Plane at infinity, then planes.
-  // The previous pair's motion seeds this pair's (ThresholdInfinity's fast path).
-  auto t0 = std::chrono::steady_clock::now();
-  StatusOr<InfinityResult> inf = ThresholdInfinity(
-      pair.correspondences, intrinsics_, options_.infinity, prior_tracker_.PriorFor(pair));
-  prior_tracker_.Record(pair, inf.ok() ? &*inf : nullptr);
-  step.times.threshold_ms = MsSince(t0);
-  step.kept = inf.ok() ? static_cast<int>(inf->kept_indices.size()) : 0;
-  t0 = std::chrono::steady_clock::now();
-  StatusOr<PlaneExtractionResult> extraction = inf.ok()
-                                                   ? extractor_.Process(pair, *inf, intrinsics_)
-                                                   : extractor_.Process(pair, std::vector<int>{});
-  step.times.fit_ms = MsSince(t0);
-  if (extraction.ok()) step.extracted = extraction->planes;
-
+// The filter's observations: per extracted plane, its correspondences.
+std::vector<PlaneObservation> ObservationsOf(const AnchorPair& pair,
+                                             const std::vector<ExtractedPlane>& extracted) {
   std::vector<PlaneObservation> observations;
-  for (const ExtractedPlane& plane : step.extracted) {
+  for (const ExtractedPlane& plane : extracted) {
     PlaneObservation obs;
     obs.track_id = plane.track_id;
     for (int i : plane.correspondence_indices) {
@@ -78,58 +28,56 @@ PipelineStep Pipeline::Process(const AnchorPair& pair) {
     }
     observations.push_back(std::move(obs));
   }
+  return observations;
+}
 
-  t0 = std::chrono::steady_clock::now();
+}  // namespace
+
+Pipeline::Pipeline(const Intrinsics& intrinsics, double sigma_px, PipelineOptions options)
+    : intrinsics_(intrinsics),
+      options_(options),
+      front_end_(intrinsics, sigma_px, options),
+      ekf_(intrinsics, options.ekf) {}
+
+StatusOr<std::optional<PipelineStep>> Pipeline::Push(const FrameRecord& frame) {
+  if (frame.index <= last_index_) {
+    return InvalidArgumentError("frame " + std::to_string(frame.index) + " after frame " +
+                                std::to_string(last_index_) +
+                                ": frames must come in display order");
+  }
+  last_index_ = frame.index;
+  std::optional<FrontEndStep> front = front_end_.Push(frame);
+  if (!front.has_value()) return std::optional<PipelineStep>();
+  return std::optional<PipelineStep>(Process(*front));
+}
+
+void Pipeline::Break() {
+  front_end_.Reset();
+  ekf_ = PlaneEkf(intrinsics_, options_.ekf);
+}
+
+PipelineStep Pipeline::Process(const FrontEndStep& front) {
+  const AnchorPair& pair = front.pair;
+  PipelineStep step;
+  step.earlier_index = pair.earlier_index;
+  step.later_index = pair.later_index;
+  step.timestamp_s = pair.later_timestamp_s;
+  step.segment = pair.type;
+  step.correspondences = static_cast<int>(pair.correspondences.size());
+  static_cast<FrontEndTimes&>(step.times) = front.times;
+  // A failed motion or extraction: the filter goes on without planes.
+  step.kept = front.infinity.ok() ? static_cast<int>(front.infinity->kept_indices.size()) : 0;
+  if (front.extraction.ok()) step.extracted = front.extraction->planes;
+  const std::vector<PlaneObservation> observations = ObservationsOf(pair, step.extracted);
+  const double dt_s = pair.later_timestamp_s - pair.earlier_timestamp_s;
+
+  const auto t0 = std::chrono::steady_clock::now();
   if (!(dt_s > 0)) {
     step.note = "anchor timestamps do not increase";
   } else if (!ekf_.initialized()) {
-    const bool has_motion = inf.ok() && inf->has_motion;
-    if (!has_motion) {
-      step.note = "waiting to initialise: no reliable motion between the anchors";
-    } else if (static_cast<int>(step.extracted.size()) < options_.min_planes_to_initialise) {
-      step.note = "waiting to initialise: no plane extracted";
-    } else {
-      Rigid3d prev_from_cur = inf->later_from_earlier.Inverse();
-      const ScaleOptions& sc = options_.scale;
-      double length = 1.0;  // up to scale, or the last step's length on re-initialisation
-      if (trajectory_.size() >= 2) {
-        const auto& a = trajectory_[trajectory_.size() - 2].world_from_cam.translation;
-        const auto& b = trajectory_.back().world_from_cam.translation;
-        length = std::max((b - a).norm(), 1e-6);
-      } else if (sc.source == ScaleOptions::Source::kFirstStep) {
-        length = sc.first_step_m;
-        metric_ = true;
-      } else if (sc.source == ScaleOptions::Source::kSpeed) {
-        length = sc.speed_mps * dt_s;
-        metric_ = true;
-      }
-      prev_from_cur.translation = prev_from_cur.translation.normalized() * length;
-      Status s = ekf_.Initialize(prev_from_cur, dt_s);
-      if (s.ok()) s = ekf_.Update(observations, &step.ekf);
-      if (!s.ok()) {
-        step.note = "initialisation failed: " + s.ToString();
-        ekf_ = PlaneEkf(intrinsics_, options_.ekf);
-      } else {
-        if (trajectory_.empty() || trajectory_.back().index != pair.earlier_index) {
-          if (trajectory_.empty()) world_from_cam_ = Rigid3d();
-          trajectory_.push_back({pair.earlier_index, pair.earlier_timestamp_s, world_from_cam_});
-        }
-        world_from_cam_ = world_from_cam_ * ekf_.prev_from_cur();
-        step.tracking = true;
-      }
-    }
+    Initialise(front, observations, dt_s, &step);
   } else {
-    Status s = ekf_.Predict(dt_s);
-    if (s.ok()) s = ekf_.Update(observations, &step.ekf);
-    if (!s.ok()) {
-      // Numerical failure: restart the filter on a later pair; the trajectory
-      // continues from the last pose with the last step's length as scale.
-      step.note = "filter reset: " + s.ToString();
-      ekf_ = PlaneEkf(intrinsics_, options_.ekf);
-    } else {
-      world_from_cam_ = world_from_cam_ * ekf_.prev_from_cur();
-      step.tracking = true;
-    }
+    Advance(observations, dt_s, &step);
   }
   step.times.ekf_ms = MsSince(t0);
   if (step.tracking) {
@@ -148,21 +96,81 @@ PipelineStep Pipeline::Process(const AnchorPair& pair) {
   return step;
 }
 
+double Pipeline::InitialStepLength(double dt_s) {
+  const ScaleOptions& sc = options_.scale;
+  double length = 1.0;  // up to scale, or the last step's length on re-initialisation
+  if (trajectory_.size() >= 2) {
+    const auto& a = trajectory_[trajectory_.size() - 2].world_from_cam.translation;
+    const auto& b = trajectory_.back().world_from_cam.translation;
+    length = std::max((b - a).norm(), 1e-6);
+  } else if (sc.source == ScaleOptions::Source::kFirstStep) {
+    length = sc.first_step_m;
+    metric_ = true;
+  } else if (sc.source == ScaleOptions::Source::kSpeed) {
+    length = sc.speed_mps * dt_s;
+    metric_ = true;
+  }
+  return length;
+}
+
+void Pipeline::Initialise(const FrontEndStep& front,
+                          const std::vector<PlaneObservation>& observations, double dt_s,
+                          PipelineStep* step) {
+  const bool has_motion = front.infinity.ok() && front.infinity->has_motion;
+  if (!has_motion) {
+    step->note = "waiting to initialise: no reliable motion between the anchors";
+    return;
+  }
+  if (static_cast<int>(step->extracted.size()) < options_.min_planes_to_initialise) {
+    step->note = "waiting to initialise: no plane extracted";
+    return;
+  }
+  Rigid3d prev_from_cur = front.infinity->later_from_earlier.Inverse();
+  prev_from_cur.translation = prev_from_cur.translation.normalized() * InitialStepLength(dt_s);
+  Status s = ekf_.Initialize(prev_from_cur, dt_s);
+  if (s.ok()) s = ekf_.Update(observations, &step->ekf);
+  if (!s.ok()) {
+    step->note = "initialisation failed: " + s.ToString();
+    ekf_ = PlaneEkf(intrinsics_, options_.ekf);
+    return;
+  }
+  const AnchorPair& pair = front.pair;
+  if (trajectory_.empty() || trajectory_.back().index != pair.earlier_index) {
+    if (trajectory_.empty()) world_from_cam_ = Rigid3d();
+    trajectory_.push_back({pair.earlier_index, pair.earlier_timestamp_s, world_from_cam_});
+  }
+  world_from_cam_ = world_from_cam_ * ekf_.prev_from_cur();
+  step->tracking = true;
+}
+
+void Pipeline::Advance(const std::vector<PlaneObservation>& observations, double dt_s,
+                       PipelineStep* step) {
+  Status s = ekf_.Predict(dt_s);
+  if (s.ok()) s = ekf_.Update(observations, &step->ekf);
+  if (!s.ok()) {
+    // Numerical failure: restart the filter on a later pair; the trajectory
+    // continues from the last pose with the last step's length as scale.
+    step->note = "filter reset: " + s.ToString();
+    ekf_ = PlaneEkf(intrinsics_, options_.ekf);
+    return;
+  }
+  world_from_cam_ = world_from_cam_ * ekf_.prev_from_cur();
+  step->tracking = true;
+}
+
 void Pipeline::RecordPlanes(const PipelineStep& step, const AnchorPair& pair) {
-  const Eigen::Matrix3d R_wc = world_from_cam_.R();
   for (const PlaneTrack& track : ekf_.planes()) {
-    if (track.missed_updates > 0) continue;  // the road, kept without an observation
+    if (track.coasting()) continue;  // not observed in this update
     MapPlane& mp = plane_map_[track.track_id];
     if (mp.track_id < 0) {
       mp.track_id = track.track_id;
       mp.first_seen_index = step.later_index;
       mp.first_seen_s = step.timestamp_s;
     }
-    const Eigen::Vector3d n_c = track.pi.normalized();
-    const double d_c = 1.0 / track.pi.norm();
-    // n_c . X_c = d_c with X_c = R_wc^T (X_w - t_wc):  n_w = R_wc n_c, d_w = d_c + n_w . t_wc.
-    mp.normal_world = R_wc * n_c;
-    mp.distance_m = d_c + mp.normal_world.dot(world_from_cam_.translation);
+    const Plane3d plane_world =
+        TransformPlane(world_from_cam_, Plane3d::FromInverseDepth(track.pi));
+    mp.normal_world = plane_world.normal;
+    mp.distance_m = plane_world.distance;
     mp.pi_cam = track.pi;
     mp.last_seen_index = step.later_index;
     mp.last_seen_s = step.timestamp_s;
@@ -187,9 +195,8 @@ void Pipeline::MaybeFixScaleFromRoad() {
   const ScaleOptions& sc = options_.scale;
   for (const PlaneTrack& track : ekf_.planes()) {
     if (track.observations < sc.road_min_observations) continue;
-    // Road: normal close to the camera's y axis (down), i.e. pi ~ (0, 1/h, 0).
-    const Eigen::Vector3d n = track.pi.normalized();
-    if (n.y() < std::cos(25.0 * M_PI / 180.0)) continue;
+    // Road: pi ~ (0, 1/h, 0), so the camera height h is 1 / |pi|.
+    if (!IsRoadLike(track.pi, CameraDown(), sc.road_max_angle_deg)) continue;
     ApplyScale(sc.camera_height_m * track.pi.norm());
     metric_ = true;
     return;
@@ -198,7 +205,7 @@ void Pipeline::MaybeFixScaleFromRoad() {
 
 void Pipeline::ApplyScale(double s) {
   ekf_.Rescale(s);
-  for (TrajectoryPoint& p : trajectory_) p.world_from_cam.translation *= s;
+  for (TimedPose& p : trajectory_) p.world_from_cam.translation *= s;
   world_from_cam_.translation *= s;
   for (auto& [id, mp] : plane_map_) {
     mp.distance_m *= s;

@@ -1,6 +1,7 @@
 // The SLAPSE pipeline in streaming form: frame records in (display order),
-// one step per anchor pair out. Stages (ALGORITHM.md §2-5):
-//   SegmentMerger -> ThresholdInfinity -> PlaneExtractor -> PlaneEkf.
+// one step per anchor pair out. Stages (paper Sec. V-VI, docs/METHOD.md):
+//   FrontEnd (SegmentMerger -> pair motion + ThresholdInfinity ->
+//   PlaneExtractor, core/pipeline/front_end.h) -> PlaneEkf.
 // No stage buffers more than one GOP segment, so the service can run it live.
 //
 // Frames: the world frame is the camera frame of the first anchor the filter
@@ -17,9 +18,11 @@
 #include "core/common/camera.h"
 #include "core/common/rigid3.h"
 #include "core/common/status.h"
+#include "core/common/timed_pose.h"
 #include "core/ekf/plane_ekf.h"
 #include "core/merge/mv_merge.h"
 #include "core/mv/frame_record.h"
+#include "core/pipeline/front_end.h"
 #include "core/planes/infinity.h"
 #include "core/planes/plane_extraction.h"
 
@@ -35,16 +38,16 @@ struct ScaleOptions {
   // kSpeed: the vehicle's speed at initialisation, m/s.
   double speed_mps = 0.0;
   // kCameraHeight: the camera's height above the road plane, m. The scale is
-  // fixed when a road plane (normal within 25 deg of the camera's down axis)
+  // fixed when a filter plane that is road-like (core/common/road.h: normal
+  // within road_max_angle_deg of the camera's down axis, below the camera)
   // has been tracked for `road_min_observations` updates.
   double camera_height_m = 0.0;
   int road_min_observations = 5;
+  double road_max_angle_deg = 25.0;
 };
 
-struct PipelineOptions {
-  MergeOptions merge;
-  InfinityOptions infinity;
-  PlaneExtractionOptions extraction;
+// The front end's options (merge, infinity, extraction) and the filter's.
+struct PipelineOptions : FrontEndOptions {
   EkfOptions ekf;
   ScaleOptions scale;
   // Initialise only on a pair with motion and at least this many planes.
@@ -67,8 +70,8 @@ struct MapPlane {
 };
 
 // Wall-clock cost of each stage for one anchor pair, milliseconds.
-struct StageTimes {
-  double merge_ms = 0, threshold_ms = 0, fit_ms = 0, ekf_ms = 0;
+struct StageTimes : FrontEndTimes {
+  double ekf_ms = 0;
 };
 
 struct PipelineStep {
@@ -82,7 +85,11 @@ struct PipelineStep {
   std::vector<ExtractedPlane> extracted;  // this pair's planes (MB sets, homographies)
   // Per extracted plane: the track id of the filter plane it is an
   // observation of (its own id, or the road's when the filter re-identified
-  // it as the road; PlaneEkf::FilterTrackId).
+  // it as the road; PlaneEkf::FilterTrackId). The one bridge between the two
+  // identities a plane has (docs/METHOD.md "Where each rule lives"): the
+  // extractor's track id (MB sets followed from pair to pair) and the
+  // filter's (which merges re-found road tracks into one plane and splits a
+  // track that fails the association gate).
   std::vector<int> extracted_filter_ids;
   // The filter's planes after this step (n / d in the later anchor's camera).
   std::vector<PlaneTrack> planes;
@@ -109,33 +116,35 @@ class Pipeline {
   // Later frames still need larger indices and timestamps.
   void Break();
 
-  struct TrajectoryPoint {
-    int64_t index;
-    double timestamp_s;
-    Rigid3d world_from_cam;
-  };
-  const std::vector<TrajectoryPoint>& trajectory() const { return trajectory_; }
+  using TrajectoryPoint = TimedPose;  // the old name; callers move to TimedPose
+  const std::vector<TimedPose>& trajectory() const { return trajectory_; }
   // Every plane the filter ever held, by track id.
   const std::map<int, MapPlane>& plane_map() const { return plane_map_; }
   bool metric() const { return metric_; }
 
  private:
-  PipelineStep Process(const AnchorPair& pair);
+  PipelineStep Process(const FrontEndStep& front);
+  // Starts the filter on the step's pair (waiting or failing sets step->note).
+  void Initialise(const FrontEndStep& front, const std::vector<PlaneObservation>& observations,
+                  double dt_s, PipelineStep* step);
+  // Predicts and updates the running filter (a numerical failure resets it).
+  void Advance(const std::vector<PlaneObservation>& observations, double dt_s,
+               PipelineStep* step);
+  // The first step's length when the filter starts: the last step's on
+  // re-initialisation, else from the scale source (may set metric_).
+  double InitialStepLength(double dt_s);
   void RecordPlanes(const PipelineStep& step, const AnchorPair& pair);
   void ApplyScale(double s);
   void MaybeFixScaleFromRoad();
 
   Intrinsics intrinsics_;
   PipelineOptions options_;
-  SegmentMerger merger_;
-  PlaneExtractor extractor_;
+  FrontEnd front_end_;
   PlaneEkf ekf_;
-  InfinityPriorTracker prior_tracker_;  // ThresholdInfinity's seeded fast path
   int64_t last_index_ = -1;
-  double last_anchor_s_ = 0.0;
   Rigid3d world_from_cam_;
   bool metric_ = false;
-  std::vector<TrajectoryPoint> trajectory_;
+  std::vector<TimedPose> trajectory_;
   std::map<int, MapPlane> plane_map_;
 };
 

@@ -1,302 +1,44 @@
 #include "core/planes/infinity.h"
 
-#include <algorithm>
 #include <cmath>
-#include <limits>
 #include <string>
-
-#include <Eigen/Geometry>
-#include <Eigen/SVD>
-#include <opencv2/calib3d.hpp>
-#include <opencv2/core.hpp>
-
-#include "core/common/so3.h"
-#include "core/estimators/ransac.h"
-#include "core/estimators/relative_pose.h"
+#include <utility>
 
 namespace slapse {
-namespace {
-
-// Rotation-only model for Ransac<>: Y ~ R X for rays X (earlier camera) and Y
-// (later camera), both K^{-1} [u, v, 1] (z = 1).
-// Estimate: Kabsch / orthogonal Procrustes on the unit bearings, i.e. the R
-// maximising sum_i yhat_i^T R xhat_i (2 points minimal, least squares for more).
-// Residual: squared error on the normalised image plane z = 1,
-// ||dehom(R x) - dehom(y)||^2; +infinity when (R x)_z <= 0.
-struct RotationOnlyEstimator {
-  using X_t = Eigen::Vector3d;
-  using Y_t = Eigen::Vector3d;
-  using M_t = Eigen::Matrix3d;
-  static constexpr int kMinNumSamples = 2;
-
-  static void Estimate(const std::vector<X_t>& X, const std::vector<Y_t>& Y,
-                       std::vector<M_t>* models) {
-    models->clear();
-    if (X.size() < kMinNumSamples || X.size() != Y.size()) return;
-    Eigen::Matrix3d M = Eigen::Matrix3d::Zero();
-    for (size_t i = 0; i < X.size(); ++i) {
-      M += Y[i].normalized() * X[i].normalized().transpose();
-    }
-    Eigen::JacobiSVD<Eigen::Matrix3d> svd(M, Eigen::ComputeFullU | Eigen::ComputeFullV);
-    // Two independent directions are needed: rank(M) >= 2.
-    if (!(svd.singularValues()(1) > 1e-9 * svd.singularValues()(0))) return;
-    Eigen::Matrix3d D = Eigen::Matrix3d::Identity();
-    D(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0 ? -1.0 : 1.0;
-    models->push_back(svd.matrixU() * D * svd.matrixV().transpose());
-  }
-
-  static void Residuals(const std::vector<X_t>& X, const std::vector<Y_t>& Y, const M_t& R,
-                        std::vector<double>* squared_residuals) {
-    squared_residuals->resize(X.size());
-    for (size_t i = 0; i < X.size(); ++i) {
-      const Eigen::Vector3d p = R * X[i];
-      (*squared_residuals)[i] = p.z() > 1e-12 ? (p.hnormalized() - Y[i].hnormalized()).squaredNorm()
-                                              : std::numeric_limits<double>::infinity();
-    }
-  }
-};
-
-// ||dehom(K R K^{-1} x_earlier) - x_later|| in pixels; +infinity behind the camera.
-double RotationOnlyParallaxPx(const Eigen::Matrix3d& KRKinv, const Correspondence& c) {
-  const Eigen::Vector3d p = KRKinv * c.x_earlier_px.homogeneous();
-  if (!(p.z() > 0.0)) return std::numeric_limits<double>::infinity();
-  return (p.hnormalized() - c.x_later_px).norm();
-}
-
-Status ValidateInputs(const std::vector<Correspondence>& correspondences,
-                      const Intrinsics& intrinsics, const InfinityOptions& options) {
-  if (!(intrinsics.fx_px > 0.0) || !(intrinsics.fy_px > 0.0) || !std::isfinite(intrinsics.fx_px) ||
-      !std::isfinite(intrinsics.fy_px) || !std::isfinite(intrinsics.cx_px) ||
-      !std::isfinite(intrinsics.cy_px)) {
-    return InvalidArgumentError(
-        "ThresholdInfinity: intrinsics need positive finite focal "
-        "lengths and a finite principal point");
-  }
-  if (!(options.tau_inf_px > 0.0) || !(options.ransac_threshold_px > 0.0) ||
-      !(options.confidence > 0.0 && options.confidence < 1.0) ||
-      !(options.min_parallax_inlier_ratio >= 0.0 && options.min_parallax_inlier_ratio <= 1.0) ||
-      !(options.prior_min_inlier_ratio >= 0.0) || !(options.prior_decision_margin >= 1.0)) {
-    return InvalidArgumentError(
-        "ThresholdInfinity: thresholds must be > 0, confidence in (0, 1), "
-        "min_parallax_inlier_ratio in [0, 1], prior_min_inlier_ratio >= 0 and "
-        "prior_decision_margin >= 1");
-  }
-  for (size_t i = 0; i < correspondences.size(); ++i) {
-    if (!correspondences[i].x_later_px.allFinite() ||
-        !correspondences[i].x_earlier_px.allFinite()) {
-      return InvalidArgumentError("ThresholdInfinity: correspondence " + std::to_string(i) +
-                                  " has non-finite coordinates");
-    }
-  }
-  return Status::Ok();
-}
-
-// Rotation-only outliers (off R_rot by >= min_parallax_px, or all points when
-// there is no rotation model) and how many of them are E-inliers.
-void CountParallax(const std::vector<Correspondence>& correspondences, const Eigen::Matrix3d& K,
-                   const Eigen::Matrix3d& K_inv, const Eigen::Matrix3d* R_rot,
-                   const std::vector<char>& e_inlier_mask, double min_parallax_px,
-                   int* num_rotation_outliers, int* num_parallax_inliers) {
-  *num_rotation_outliers = *num_parallax_inliers = 0;
-  const Eigen::Matrix3d KRrot = R_rot != nullptr ? Eigen::Matrix3d(K * *R_rot * K_inv) : K;
-  for (size_t i = 0; i < correspondences.size(); ++i) {
-    if (R_rot != nullptr && RotationOnlyParallaxPx(KRrot, correspondences[i]) < min_parallax_px) {
-      continue;
-    }
-    ++*num_rotation_outliers;
-    *num_parallax_inliers += e_inlier_mask[i];
-  }
-}
-
-// Correspondences whose Sampson distance under later_from_earlier is <= max_error
-// (normalised units).
-int CountSampsonInliers(const std::vector<Eigen::Vector3d>& rays_earlier,
-                        const std::vector<Eigen::Vector3d>& rays_later,
-                        const Rigid3d& later_from_earlier, double max_error) {
-  const Eigen::Matrix3d E = Skew(later_from_earlier.translation) * later_from_earlier.R();
-  int count = 0;
-  for (size_t i = 0; i < rays_earlier.size(); ++i) {
-    count += std::abs(SampsonDistance(E, rays_earlier[i], rays_later[i])) <= max_error ? 1 : 0;
-  }
-  return count;
-}
-
-}  // namespace
 
 StatusOr<InfinityResult> ThresholdInfinity(const std::vector<Correspondence>& correspondences,
                                            const Intrinsics& intrinsics,
                                            const InfinityOptions& options,
                                            const InfinityPrior* prior) {
-  SLAPSE_RETURN_IF_ERROR(ValidateInputs(correspondences, intrinsics, options));
+  if (!(options.tau_inf_px > 0.0)) {
+    return InvalidArgumentError("ThresholdInfinity: tau_inf_px must be > 0, got " +
+                                std::to_string(options.tau_inf_px));
+  }
+  StatusOr<PairMotionReport> motion =
+      EstimatePairMotion(correspondences, intrinsics, options, options.tau_inf_px, prior);
+  if (!motion.ok()) return motion.status();
+  return ThresholdInfinity(correspondences, intrinsics, options.tau_inf_px, std::move(*motion));
+}
+
+InfinityResult ThresholdInfinity(const std::vector<Correspondence>& correspondences,
+                                 const Intrinsics& intrinsics, double tau_inf_px,
+                                 PairMotionReport motion) {
   const int n = static_cast<int>(correspondences.size());
   const Eigen::Matrix3d K = intrinsics.K();
   const Eigen::Matrix3d K_inv = K.inverse();
-
   InfinityResult result;
-  result.e_inlier_mask.assign(n, 0);
-  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
-
-  // The 5-point solver needs 5 points whatever min_correspondences says.
-  if (n >= std::max(options.min_correspondences, 5)) {
-    std::vector<Eigen::Vector3d> rays_earlier(n), rays_later(n);
-    for (int i = 0; i < n; ++i) {
-      rays_earlier[i] = K_inv * correspondences[i].x_earlier_px.homogeneous();
-      rays_later[i] = K_inv * correspondences[i].x_later_px.homogeneous();
-    }
-    const double mean_focal_px = 0.5 * (intrinsics.fx_px + intrinsics.fy_px);
-    const double normalised_threshold = options.ransac_threshold_px / mean_focal_px;
-    RansacOptions rotation_ransac;
-    rotation_ransac.max_error = normalised_threshold;
-    rotation_ransac.confidence = options.confidence;
-    const double min_parallax_px = std::max(options.tau_inf_px, options.ransac_threshold_px);
-
-    // Seeded fast path: refine the prior, polish the rotation-only model from
-    // it, accept only a clear has_motion decision.
-    bool done = false;
-    if (prior != nullptr && options.use_prior &&
-        prior->later_from_earlier.translation.norm() > 0.0 &&
-        prior->later_from_earlier.translation.allFinite()) {
-      RelativePoseRefineOptions refine_options;
-      refine_options.max_error = normalised_threshold;
-      const RelativePoseRefineReport refined =
-          RefineRelativePose(rays_earlier, rays_later, prior->later_from_earlier, refine_options);
-      if (refined.success && refined.num_inliers >= options.prior_min_inlier_ratio *
-                                                        prior->reference_inlier_ratio * n) {
-        const int cheirality = CountCheirality(rays_earlier, rays_later, refined.later_from_earlier,
-                                               refined.inlier_mask);
-        const RansacReport<Eigen::Matrix3d> rotation =
-            Ransac<RotationOnlyEstimator>(rotation_ransac)
-                .Polish(rays_earlier, rays_later,
-                        {refined.later_from_earlier.R(), prior->later_from_earlier.R()});
-        int rotation_outliers = 0, parallax_inliers = 0;
-        CountParallax(correspondences, K, K_inv, rotation.success ? &rotation.model : nullptr,
-                      refined.inlier_mask, min_parallax_px, &rotation_outliers, &parallax_inliers);
-        const double margin = options.prior_decision_margin;
-        if (rotation.success && cheirality >= margin * options.min_correspondences &&
-            cheirality >= 0.5 * refined.num_inliers &&
-            parallax_inliers >= margin * options.min_correspondences &&
-            parallax_inliers >=
-                std::min(1.0, margin * options.min_parallax_inlier_ratio) * rotation_outliers) {
-          result.has_motion = true;
-          result.motion_from_prior = true;
-          result.rotation_source = InfinityRotationSource::kEssential;
-          result.later_from_earlier = refined.later_from_earlier;
-          result.e_inlier_mask = refined.inlier_mask;
-          result.num_e_inliers = refined.num_inliers;
-          result.num_sampson_inliers = refined.num_inliers;
-          result.num_cheirality_inliers = cheirality;
-          result.num_rotation_outliers = rotation_outliers;
-          result.num_parallax_inliers = parallax_inliers;
-          R = refined.later_from_earlier.R();
-          done = true;
-        }
-      }
-    }
-
-    if (!done) {
-      // Rotation-only fit.
-      const RansacReport<Eigen::Matrix3d> rotation =
-          Ransac<RotationOnlyEstimator>(rotation_ransac).Estimate(rays_earlier, rays_later);
-
-      // Essential matrix and cheirality, points1 = earlier, points2 = later, so
-      // OpenCV's (R, t) is later_from_earlier.
-      std::vector<cv::Point2d> pts_earlier(n), pts_later(n);
-      for (int i = 0; i < n; ++i) {
-        pts_earlier[i] = {correspondences[i].x_earlier_px.x(), correspondences[i].x_earlier_px.y()};
-        pts_later[i] = {correspondences[i].x_later_px.x(), correspondences[i].x_later_px.y()};
-      }
-      const cv::Mat K_cv = (cv::Mat_<double>(3, 3) << intrinsics.fx_px, 0, intrinsics.cx_px, 0,
-                            intrinsics.fy_px, intrinsics.cy_px, 0, 0, 1);
-      bool have_e = false;
-      Eigen::Matrix3d R_e = Eigen::Matrix3d::Identity();
-      Eigen::Vector3d t_e = Eigen::Vector3d::Zero();
-      try {
-        cv::Mat e_mask;
-        const cv::Mat E =
-            cv::findEssentialMat(pts_earlier, pts_later, K_cv, cv::USAC_MAGSAC, options.confidence,
-                                 options.ransac_threshold_px, 1000, e_mask);
-        // findEssentialMat may stack several 3x3 solutions; the first is the best.
-        if (!e_mask.empty() && e_mask.type() != CV_8U) e_mask.convertTo(e_mask, CV_8U);
-        if (E.cols == 3 && E.rows >= 3 && e_mask.total() == static_cast<size_t>(n)) {
-          for (int i = 0; i < n; ++i) {
-            result.e_inlier_mask[i] = e_mask.at<uchar>(i) != 0 ? 1 : 0;
-            result.num_e_inliers += result.e_inlier_mask[i];
-          }
-          cv::Mat pose_mask = e_mask.clone();
-          cv::Mat R_cv, t_cv;
-          result.num_cheirality_inliers = cv::recoverPose(E.rowRange(0, 3), pts_earlier, pts_later,
-                                                          K_cv, R_cv, t_cv, pose_mask);
-          R_cv.convertTo(R_cv, CV_64F);
-          t_cv.convertTo(t_cv, CV_64F);
-          for (int r = 0; r < 3; ++r) {
-            t_e(r) = t_cv.at<double>(r);
-            for (int c = 0; c < 3; ++c) R_e(r, c) = R_cv.at<double>(r, c);
-          }
-          have_e = R_e.allFinite() && t_e.allFinite() && t_e.norm() > 0.0;
-        }
-      } catch (const cv::Exception& e) {
-        return InternalError(std::string("ThresholdInfinity: OpenCV failed: ") + e.what());
-      }
-
-      // Translation is observed when enough E-inliers carry parallax that the
-      // rotation-only model cannot explain.
-      CountParallax(correspondences, K, K_inv, rotation.success ? &rotation.model : nullptr,
-                    result.e_inlier_mask, min_parallax_px, &result.num_rotation_outliers,
-                    &result.num_parallax_inliers);
-      result.has_motion = have_e && result.num_cheirality_inliers >= options.min_correspondences &&
-                          result.num_parallax_inliers >= options.min_correspondences &&
-                          result.num_parallax_inliers >=
-                              options.min_parallax_inlier_ratio * result.num_rotation_outliers;
-      if (result.has_motion) {
-        R = R_e;
-        result.rotation_source = InfinityRotationSource::kEssential;
-        result.later_from_earlier = Rigid3d(R_e, t_e.normalized());
-        result.num_sampson_inliers = CountSampsonInliers(
-            rays_earlier, rays_later, result.later_from_earlier, normalised_threshold);
-      } else if (rotation.success) {
-        R = rotation.model;
-        result.rotation_source = InfinityRotationSource::kRotationOnly;
-        result.later_from_earlier = Rigid3d(R, Eigen::Vector3d::Zero());
-      }
-    }
-  }
-
-  const Eigen::Matrix3d KRKinv = K * R * K_inv;
+  static_cast<PairMotionReport&>(result) = std::move(motion);
+  const Eigen::Matrix3d KRKinv = K * result.R_later_from_earlier * K_inv;
   result.parallax_px.resize(n);
   for (int i = 0; i < n; ++i) {
     result.parallax_px[i] = RotationOnlyParallaxPx(KRKinv, correspondences[i]);
-    if (result.parallax_px[i] >= options.tau_inf_px) {
+    if (result.parallax_px[i] >= tau_inf_px) {
       result.kept_indices.push_back(i);
     } else {
       result.dropped_indices.push_back(i);
     }
   }
   return result;
-}
-
-const InfinityPrior* InfinityPriorTracker::PriorFor(const AnchorPair& pair) const {
-  return prior_.has_value() && pair.earlier_index == later_index_ ? &*prior_ : nullptr;
-}
-
-void InfinityPriorTracker::Record(const AnchorPair& pair, const InfinityResult* result) {
-  if (result == nullptr || !result->has_motion || pair.correspondences.empty()) {
-    Reset();
-    return;
-  }
-  const InfinityPrior* used = PriorFor(pair);
-  InfinityPrior prior;
-  prior.later_from_earlier = result->later_from_earlier;
-  prior.reference_inlier_ratio =
-      result->motion_from_prior && used != nullptr
-          ? used->reference_inlier_ratio
-          : static_cast<double>(result->num_sampson_inliers) / pair.correspondences.size();
-  prior_ = prior;
-  later_index_ = pair.later_index;
-}
-
-void InfinityPriorTracker::Reset() {
-  prior_.reset();
-  later_index_ = -1;
 }
 
 }  // namespace slapse

@@ -8,14 +8,15 @@
 #include <string>
 #include <utility>
 
+#include "core/common/angles.h"
+#include "core/common/mb_grid.h"
+#include "core/common/road.h"
 #include "core/estimators/epipolar_plane.h"
 #include "core/estimators/homography.h"
 #include "core/estimators/ransac.h"
 
 namespace slapse {
 namespace {
-
-constexpr double kMbSizePx = 16.0;
 
 // SplitMix64 finaliser: decorrelates the seeds of consecutive RANSAC calls.
 uint64_t MixSeed(uint64_t seed, uint64_t call) {
@@ -50,13 +51,12 @@ void MbNeighbours(const std::vector<int>& mb_of, int mb_cols, int mb_rows, int r
   }
 }
 
-// Row-major index of the MB cell containing pixel position p, or -1 outside the
-// grid. Pixel centres are on integers, so cell c spans [16c - 0.5, 16c + 15.5).
-int MbCellOf(const Eigen::Vector2d& p, int mb_cols, int mb_rows) {
-  const double col = std::floor((p.x() + 0.5) / kMbSizePx);
-  const double row = std::floor((p.y() + 0.5) / kMbSizePx);
-  if (!(col >= 0 && col < mb_cols && row >= 0 && row < mb_rows)) return -1;
-  return static_cast<int>(row) * mb_cols + static_cast<int>(col);
+// Row-major index of the MB cell (core/common/mb_grid.h) containing pixel
+// position p, or -1 outside the mb_cols x mb_rows grid.
+int GridCellOf(const Eigen::Vector2d& p, int mb_cols, int mb_rows) {
+  const MbCell cell = MbCellOfPixel(p);
+  if (!(cell.col >= 0 && cell.col < mb_cols && cell.row >= 0 && cell.row < mb_rows)) return -1;
+  return cell.row * mb_cols + cell.col;
 }
 
 // The points of `mask` (one entry per point, point j in MB cell mb_of[j]) whose
@@ -303,9 +303,209 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
   return Process(pair, infinity.kept_indices, infinity.has_motion ? &motion : nullptr);
 }
 
+// One Process call's working set: the pair, the fitter and the correspondences
+// not yet on a plane (`remaining`, indices into pair.correspondences), with
+// the RANSAC runs, the consensus post-processing and the plane construction
+// over them.
+class PlaneExtractor::PairFit {
+ public:
+  // A plane hypothesis over `remaining`: its model and inlier mask.
+  struct Consensus {
+    PlaneModel model;
+    std::vector<char> mask;
+  };
+
+  PairFit(const AnchorPair& pair, const PlaneExtractionOptions& options, const PairMotion* motion,
+          std::vector<int> remaining)
+      : pair_(pair),
+        corr_(pair.correspondences),
+        options_(options),
+        fitter_(MakeFitter(motion)),
+        remaining_(std::move(remaining)),
+        max_sq_error_(options.eps_h_px * options.eps_h_px) {
+    ransac_options_.max_error = options_.eps_h_px;
+    ransac_options_.confidence = options_.confidence;
+    ransac_options_.min_num_trials = options_.min_trials_per_plane;
+    ransac_options_.max_num_trials = options_.max_trials_per_plane;
+    ransac_options_.pretest_points = options_.ransac_pretest_points;
+    const int num_mbs = pair.mb_cols * pair.mb_rows;
+    empty_cells_.assign(num_mbs, 1);  // MB cells without any correspondence
+    for (const Correspondence& c : corr_) {
+      if (c.mb_index >= 0 && c.mb_index < num_mbs) empty_cells_[c.mb_index] = 0;
+    }
+  }
+
+  const std::vector<int>& remaining() const { return remaining_; }
+  int MinSamples() const { return fitter_->MinSamples(); }
+  const Correspondence& correspondence(int i) const { return corr_[i]; }
+
+  // Runs RANSAC over `remaining` (local indices in `subset`); discovery (no
+  // subset) samples locally when local_sampling_radius_mbs > 0. RANSAC call
+  // j of the pair is seeded from (seed, j).
+  RansacReport<PlaneModel> Ransac(const std::vector<int>* subset) {
+    x_later_.resize(remaining_.size());
+    x_earlier_.resize(remaining_.size());
+    mb_of_.resize(remaining_.size());
+    for (size_t j = 0; j < remaining_.size(); ++j) {
+      x_later_[j] = corr_[remaining_[j]].x_later_px;
+      x_earlier_[j] = corr_[remaining_[j]].x_earlier_px;
+      mb_of_[j] = corr_[remaining_[j]].mb_index;
+    }
+    fitter_->SetPoints(x_later_, x_earlier_);
+    ransac_options_.seed = MixSeed(options_.seed, ransac_call_++);
+    const bool local = subset == nullptr && options_.local_sampling_radius_mbs > 0;
+    if (local) {
+      MbNeighbours(mb_of_, pair_.mb_cols, pair_.mb_rows, options_.local_sampling_radius_mbs,
+                   &neighbours_);
+    }
+    return fitter_->Ransac(ransac_options_, subset, local ? &neighbours_ : nullptr);
+  }
+
+  // Connectivity split and least-squares refits of a successful report (over
+  // the `remaining` of the last Ransac call; see the file comment of
+  // plane_extraction.h), then the optional boundary trim.
+  Consensus PostProcess(const RansacReport<PlaneModel>& report) const {
+    Consensus best{report.model, LargestComponentOf(report.inlier_mask)};
+    int best_count = CountSet(best.mask);
+    std::vector<double> sq_residuals;
+    for (int iter = 0; iter < options_.refit_iterations; ++iter) {
+      PlaneModel model;
+      if (!fitter_->FitMasked(best.mask, &model, &sq_residuals)) break;
+      std::vector<char> mask(sq_residuals.size());
+      for (size_t j = 0; j < mask.size(); ++j) mask[j] = sq_residuals[j] <= max_sq_error_ ? 1 : 0;
+      mask = LargestComponentOf(mask);
+      const int count = CountSet(mask);
+      if (count < best_count) break;
+      const bool stable = mask == best.mask;
+      best = {model, std::move(mask)};
+      best_count = count;
+      if (stable) break;
+    }
+    if (options_.boundary_residual_frac >= 0.0) {
+      // Edge blocks whose MVs fit only loosely: drop them, then keep the
+      // largest component of the rest (without peeling again).
+      HomographyEstimator::Residuals(x_later_, x_earlier_, best.model.H, &sq_residuals);
+      const double frac = options_.boundary_residual_frac;
+      best.mask = TrimBoundaryCells(
+          mb_of_, best.mask, sq_residuals, pair_.mb_cols, pair_.mb_rows,
+          frac * frac * max_sq_error_,
+          options_.boundary_ignore_empty ? empty_cells_ : std::vector<char>());
+      best.mask = LargestComponent(mb_of_, best.mask, pair_.mb_cols, pair_.mb_rows,
+                                   options_.connectivity_radius_mbs, empty_cells_,
+                                   options_.max_empty_gap_mbs);
+    }
+    return best;
+  }
+
+  // The plane of a consensus over `remaining`, with its RMS transfer error.
+  ExtractedPlane MakePlane(const Consensus& consensus, int track_id, bool tracked) const {
+    ExtractedPlane plane;
+    plane.track_id = track_id;
+    plane.tracked = tracked;
+    plane.H_earlier_from_later = consensus.model.H;
+    plane.m_later = consensus.model.m_later;
+    for (size_t j = 0; j < remaining_.size(); ++j) {
+      if (!consensus.mask[j]) continue;
+      plane.correspondence_indices.push_back(remaining_[j]);
+      plane.mb_indices.push_back(corr_[remaining_[j]].mb_index);
+    }
+    std::vector<double> sq_transfer;
+    std::vector<Eigen::Vector2d> plane_later, plane_earlier;
+    for (int i : plane.correspondence_indices) {
+      plane_later.push_back(corr_[i].x_later_px);
+      plane_earlier.push_back(corr_[i].x_earlier_px);
+    }
+    HomographyEstimator::Residuals(plane_later, plane_earlier, consensus.model.H, &sq_transfer);
+    double sum_sq = 0;
+    for (double r : sq_transfer) sum_sq += r;
+    plane.rms_transfer_px =
+        sq_transfer.empty() ? 0.0 : std::sqrt(sum_sq / static_cast<double>(sq_transfer.size()));
+    std::sort(plane.mb_indices.begin(), plane.mb_indices.end());
+    plane.mb_indices.erase(std::unique(plane.mb_indices.begin(), plane.mb_indices.end()),
+                           plane.mb_indices.end());
+    return plane;
+  }
+
+  // Removes the points of `mask` from `remaining` (appending them to `removed` if given).
+  void RemovePoints(const std::vector<char>& mask, std::vector<int>* removed) {
+    std::vector<int> rest;
+    for (size_t j = 0; j < remaining_.size(); ++j) {
+      if (!mask[j]) {
+        rest.push_back(remaining_[j]);
+      } else if (removed != nullptr) {
+        removed->push_back(remaining_[j]);
+      }
+    }
+    remaining_.swap(rest);
+  }
+
+ private:
+  std::vector<char> LargestComponentOf(const std::vector<char>& mask) const {
+    const std::vector<char> peeled =
+        PeelSparseCells(mb_of_, mask, pair_.mb_cols, pair_.mb_rows, options_.min_mb_neighbours);
+    return LargestComponent(mb_of_, peeled, pair_.mb_cols, pair_.mb_rows,
+                            options_.connectivity_radius_mbs, empty_cells_,
+                            options_.max_empty_gap_mbs);
+  }
+
+  const AnchorPair& pair_;
+  const std::vector<Correspondence>& corr_;
+  const PlaneExtractionOptions& options_;
+  const std::unique_ptr<PlaneFitter> fitter_;
+  std::vector<int> remaining_;
+  const double max_sq_error_;
+  RansacOptions ransac_options_;
+  uint64_t ransac_call_ = 0;
+  std::vector<char> empty_cells_;
+  // Of `remaining` at the last Ransac call.
+  std::vector<Eigen::Vector2d> x_later_, x_earlier_;
+  std::vector<int> mb_of_;
+  std::vector<std::vector<int>> neighbours_;  // for local sampling
+};
+
 StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
                                                         const std::vector<int>& kept_indices,
                                                         const PairMotion* motion) {
+  StatusOr<std::vector<int>> remaining = ValidatedKept(pair, kept_indices);
+  if (!remaining.ok()) return remaining.status();
+  const PairMotion* used_motion = options_.use_motion ? motion : nullptr;
+  PairFit fit(pair, options_, used_motion, std::move(*remaining));
+
+  PlaneExtractionResult result;
+  // The street-scene prior's vertical in this pair's later frame: the
+  // remembered one (in the earlier frame) rotated by the pair's motion.
+  if (used_motion != nullptr && pair.earlier_index == last_later_index_) {
+    down_ = (used_motion->later_from_earlier.R() * down_).normalized();
+  }
+  // 1. Tracking.
+  if (has_previous_ && pair.earlier_index == last_later_index_) {
+    TrackPlanes(pair, used_motion, &fit, &result);
+  } else {
+    result.num_tracks_lost = static_cast<int>(tracks_.size());
+  }
+  // 2. Discovery of new planes.
+  std::vector<int> set_aside;  // inliers of models whose largest component was too small
+  DiscoverPlanes(&fit, &result, &set_aside);
+  result.unassigned_indices = fit.remaining();
+  result.unassigned_indices.insert(result.unassigned_indices.end(), set_aside.begin(),
+                                   set_aside.end());
+  std::sort(result.unassigned_indices.begin(), result.unassigned_indices.end());
+
+  LearnVertical(result);
+  // 3. Remember the planes' MB cells in this pair's later anchor.
+  tracks_.clear();
+  for (const ExtractedPlane& plane : result.planes) {
+    tracks_.push_back({plane.track_id,
+                       std::set<int>(plane.mb_indices.begin(), plane.mb_indices.end()),
+                       plane.m_later});
+  }
+  has_previous_ = true;
+  last_later_index_ = pair.later_index;
+  return result;
+}
+
+StatusOr<std::vector<int>> PlaneExtractor::ValidatedKept(const AnchorPair& pair,
+                                                         const std::vector<int>& kept_indices) {
   const auto& corr = pair.correspondences;
   const int num_corr = static_cast<int>(corr.size());
   if (pair.mb_cols <= 0 || pair.mb_rows <= 0) {
@@ -329,217 +529,103 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
                                   " has non-finite coordinates");
     }
   }
+  return remaining;
+}
 
-  RansacOptions ransac_options;
-  ransac_options.max_error = options_.eps_h_px;
-  ransac_options.confidence = options_.confidence;
-  ransac_options.min_num_trials = options_.min_trials_per_plane;
-  ransac_options.max_num_trials = options_.max_trials_per_plane;
-  ransac_options.pretest_points = options_.ransac_pretest_points;
-  uint64_t ransac_call = 0;
+int PlaneExtractor::MinMbs(const PairFit& fit) const {
+  return std::max(options_.min_mbs_per_plane, fit.MinSamples());
+}
 
-  const PairMotion* used_motion = options_.use_motion ? motion : nullptr;
-  const std::unique_ptr<PlaneFitter> fitter = MakeFitter(used_motion);
-  std::vector<Eigen::Vector2d> x_later, x_earlier;  // of `remaining`
-  std::vector<int> mb_of;                           // of `remaining`
-  std::vector<std::vector<int>> neighbours;         // of `remaining`, for local sampling
-  // Runs RANSAC over `remaining` (local indices in `subset`); discovery
-  // (no subset) samples locally when local_sampling_radius_mbs > 0.
-  auto run_ransac = [&](const std::vector<int>* subset) {
-    x_later.resize(remaining.size());
-    x_earlier.resize(remaining.size());
-    mb_of.resize(remaining.size());
-    for (size_t j = 0; j < remaining.size(); ++j) {
-      x_later[j] = corr[remaining[j]].x_later_px;
-      x_earlier[j] = corr[remaining[j]].x_earlier_px;
-      mb_of[j] = corr[remaining[j]].mb_index;
+// The street-scene prior (see the options): the road test of
+// core/common/road.h against the learnt vertical, one-sided (a plane whose
+// normal points up, e.g. a ceiling or a canopy's underside, is no road; up to
+// this change the test took |n . down| and let them pass: no pinned output
+// changed, see docs/METHOD.md "Where each rule lives").
+bool PlaneExtractor::IsRoad(const ExtractedPlane& plane) const {
+  return IsRoadLike(*plane.m_later, down_, options_.max_road_tilt_deg);
+}
+
+// A wall (|n . down| <= sin(facade tilt)) or the road.
+bool PlaneExtractor::OrientationOk(const ExtractedPlane& plane) const {
+  if (options_.max_facade_tilt_deg < 0 || options_.max_road_tilt_deg < 0) return true;
+  if (!plane.m_later.has_value() || !(plane.m_later->norm() > 0)) return true;
+  const double facade_tilt_deg =
+      options_.max_facade_tilt_deg +
+      (vertical_learnt_ ? 0.0 : std::max(0.0, options_.unlearnt_vertical_margin_deg));
+  return std::abs(DownComponent(*plane.m_later, down_)) <= std::sin(DegToRad(facade_tilt_deg)) ||
+         IsRoad(plane);
+}
+
+// Step 1 of the file comment: each remembered plane samples from the
+// correspondences on its old MB cells (this pair's earlier anchor) and scores
+// on all remaining ones.
+void PlaneExtractor::TrackPlanes(const AnchorPair& pair, const PairMotion* motion, PairFit* fit,
+                                 PlaneExtractionResult* result) {
+  for (const Track& track : tracks_) {
+    std::vector<int> subset;
+    for (size_t j = 0; j < fit->remaining().size(); ++j) {
+      const int cell = GridCellOf(fit->correspondence(fit->remaining()[j]).x_earlier_px,
+                                  pair.mb_cols, pair.mb_rows);
+      if (cell >= 0 && track.mb_cells.count(cell)) subset.push_back(static_cast<int>(j));
     }
-    fitter->SetPoints(x_later, x_earlier);
-    ransac_options.seed = MixSeed(options_.seed, ransac_call++);
-    const bool local = subset == nullptr && options_.local_sampling_radius_mbs > 0;
-    if (local) {
-      MbNeighbours(mb_of, pair.mb_cols, pair.mb_rows, options_.local_sampling_radius_mbs,
-                   &neighbours);
+    if (static_cast<int>(result->planes.size()) >= options_.max_planes ||
+        static_cast<int>(subset.size()) < fit->MinSamples()) {
+      ++result->num_tracks_lost;
+      continue;
     }
-    return fitter->Ransac(ransac_options, subset, local ? &neighbours : nullptr);
-  };
-  // A plane hypothesis over `remaining`: its model and inlier mask.
-  struct Consensus {
-    PlaneModel model;
-    std::vector<char> mask;
-  };
-  const double max_sq_error = options_.eps_h_px * options_.eps_h_px;
-  std::vector<char> empty_cells(num_mbs, 1);  // MB cells without any correspondence
-  for (const Correspondence& c : corr) {
-    if (c.mb_index >= 0 && c.mb_index < num_mbs) empty_cells[c.mb_index] = 0;
+    const RansacReport<PlaneModel> report = fit->Ransac(&subset);
+    if (!report.success) {
+      ++result->num_tracks_lost;
+      continue;
+    }
+    const PairFit::Consensus consensus = fit->PostProcess(report);
+    int subset_inliers = 0;
+    for (int j : subset) subset_inliers += consensus.mask[j] ? 1 : 0;
+    ExtractedPlane plane = fit->MakePlane(consensus, track.track_id, /*tracked=*/true);
+    plane.track_subset_size = static_cast<int>(subset.size());
+    plane.track_subset_inliers = subset_inliers;
+    if (track.m_later.has_value() && plane.m_later.has_value() && motion != nullptr) {
+      plane.track_change = TrackChange(*track.m_later, *plane.m_later, *motion);
+    }
+    if (static_cast<int>(plane.mb_indices.size()) < MinMbs(*fit) ||
+        subset_inliers < options_.min_track_overlap * static_cast<double>(subset.size()) ||
+        plane.track_change > options_.max_track_change || !OrientationOk(plane)) {
+      ++result->num_tracks_lost;
+      continue;
+    }
+    result->planes.push_back(std::move(plane));
+    fit->RemovePoints(consensus.mask, nullptr);
   }
-  auto largest_component = [&](const std::vector<char>& mask) {
-    const std::vector<char> peeled =
-        PeelSparseCells(mb_of, mask, pair.mb_cols, pair.mb_rows, options_.min_mb_neighbours);
-    return LargestComponent(mb_of, peeled, pair.mb_cols, pair.mb_rows,
-                            options_.connectivity_radius_mbs, empty_cells,
-                            options_.max_empty_gap_mbs);
-  };
-  // Connectivity split and least-squares refits of a successful report (over
-  // the `remaining` of the last run_ransac call).
-  auto post_process = [&](const RansacReport<PlaneModel>& report) {
-    Consensus best{report.model, largest_component(report.inlier_mask)};
-    int best_count = CountSet(best.mask);
-    std::vector<double> sq_residuals;
-    for (int iter = 0; iter < options_.refit_iterations; ++iter) {
-      PlaneModel model;
-      if (!fitter->FitMasked(best.mask, &model, &sq_residuals)) break;
-      std::vector<char> mask(sq_residuals.size());
-      for (size_t j = 0; j < mask.size(); ++j) mask[j] = sq_residuals[j] <= max_sq_error ? 1 : 0;
-      mask = largest_component(mask);
-      const int count = CountSet(mask);
-      if (count < best_count) break;
-      const bool stable = mask == best.mask;
-      best = {model, std::move(mask)};
-      best_count = count;
-      if (stable) break;
-    }
-    if (options_.boundary_residual_frac >= 0.0) {
-      // Edge blocks whose MVs fit only loosely: drop them, then keep the
-      // largest component of the rest (without peeling again).
-      HomographyEstimator::Residuals(x_later, x_earlier, best.model.H, &sq_residuals);
-      const double frac = options_.boundary_residual_frac;
-      best.mask = TrimBoundaryCells(
-          mb_of, best.mask, sq_residuals, pair.mb_cols, pair.mb_rows, frac * frac * max_sq_error,
-          options_.boundary_ignore_empty ? empty_cells : std::vector<char>());
-      best.mask = LargestComponent(mb_of, best.mask, pair.mb_cols, pair.mb_rows,
-                                   options_.connectivity_radius_mbs, empty_cells,
-                                   options_.max_empty_gap_mbs);
-    }
-    return best;
-  };
-  // Builds the plane from a consensus over `remaining`.
-  auto make_plane = [&](const Consensus& consensus, int track_id, bool tracked) {
-    ExtractedPlane plane;
-    plane.track_id = track_id;
-    plane.tracked = tracked;
-    plane.H_earlier_from_later = consensus.model.H;
-    plane.m_later = consensus.model.m_later;
-    for (size_t j = 0; j < remaining.size(); ++j) {
-      if (!consensus.mask[j]) continue;
-      plane.correspondence_indices.push_back(remaining[j]);
-      plane.mb_indices.push_back(corr[remaining[j]].mb_index);
-    }
-    std::vector<double> sq_transfer;
-    std::vector<Eigen::Vector2d> plane_later, plane_earlier;
-    for (int i : plane.correspondence_indices) {
-      plane_later.push_back(corr[i].x_later_px);
-      plane_earlier.push_back(corr[i].x_earlier_px);
-    }
-    HomographyEstimator::Residuals(plane_later, plane_earlier, consensus.model.H, &sq_transfer);
-    double sum_sq = 0;
-    for (double r : sq_transfer) sum_sq += r;
-    plane.rms_transfer_px =
-        sq_transfer.empty() ? 0.0 : std::sqrt(sum_sq / static_cast<double>(sq_transfer.size()));
-    std::sort(plane.mb_indices.begin(), plane.mb_indices.end());
-    plane.mb_indices.erase(std::unique(plane.mb_indices.begin(), plane.mb_indices.end()),
-                           plane.mb_indices.end());
-    return plane;
-  };
-  // Removes the points of `mask` from `remaining` (appending them to `removed` if given).
-  auto remove_points = [&](const std::vector<char>& mask, std::vector<int>* removed) {
-    std::vector<int> rest;
-    for (size_t j = 0; j < remaining.size(); ++j) {
-      if (!mask[j]) {
-        rest.push_back(remaining[j]);
-      } else if (removed != nullptr) {
-        removed->push_back(remaining[j]);
-      }
-    }
-    remaining.swap(rest);
-  };
+}
 
-  PlaneExtractionResult result;
-  const int min_mbs = std::max(options_.min_mbs_per_plane, fitter->MinSamples());
-  // The street-scene prior on a plane's orientation (see the options).
-  // The vertical in this pair's later frame: the remembered one (in the
-  // earlier frame) rotated by the pair's motion.
-  if (used_motion != nullptr && pair.earlier_index == last_later_index_) {
-    down_ = (used_motion->later_from_earlier.R() * down_).normalized();
-  }
-  auto down_component = [&](const ExtractedPlane& plane) {
-    return std::abs(plane.m_later->dot(down_)) / plane.m_later->norm();
-  };
-  auto is_road = [&](const ExtractedPlane& plane) {
-    return down_component(plane) >= std::cos(options_.max_road_tilt_deg * M_PI / 180.0);
-  };
-  auto orientation_ok = [&](const ExtractedPlane& plane) {
-    if (options_.max_facade_tilt_deg < 0 || options_.max_road_tilt_deg < 0) return true;
-    if (!plane.m_later.has_value() || !(plane.m_later->norm() > 0)) return true;
-    const double facade_tilt_deg =
-        options_.max_facade_tilt_deg +
-        (vertical_learnt_ ? 0.0 : std::max(0.0, options_.unlearnt_vertical_margin_deg));
-    return down_component(plane) <= std::sin(facade_tilt_deg * M_PI / 180.0) || is_road(plane);
-  };
+// The remembered plane, m_e . X_e = 1 in this pair's earlier frame, moved
+// into the later one: X_e = R X_l + t gives
+//   m_l = R^T m_e / (1 - m_e . t)
+// (|t| = 1 per pair: consecutive pairs span the same number of frames, so
+// their units agree to within the change of speed). The change is
+// |m_later - m_l| / |m_l|; -1 when the plane would pass through the camera.
+double PlaneExtractor::TrackChange(const Eigen::Vector3d& m_remembered,
+                                   const Eigen::Vector3d& m_later, const PairMotion& motion) {
+  const Rigid3d earlier_from_later = motion.later_from_earlier.Inverse();
+  const double denom = 1.0 - m_remembered.dot(earlier_from_later.translation);
+  if (!(denom > 0.0)) return -1.0;
+  const Eigen::Vector3d m_pred = earlier_from_later.R().transpose() * m_remembered / denom;
+  return (m_later - m_pred).norm() / m_pred.norm();
+}
 
-  // 1. Tracking.
-  const bool can_track = has_previous_ && pair.earlier_index == last_later_index_;
-  if (!can_track) {
-    result.num_tracks_lost = static_cast<int>(tracks_.size());
-  } else {
-    for (const Track& track : tracks_) {
-      std::vector<int> subset;
-      for (size_t j = 0; j < remaining.size(); ++j) {
-        const int cell = MbCellOf(corr[remaining[j]].x_earlier_px, pair.mb_cols, pair.mb_rows);
-        if (cell >= 0 && track.mb_cells.count(cell)) subset.push_back(static_cast<int>(j));
-      }
-      if (static_cast<int>(result.planes.size()) >= options_.max_planes ||
-          static_cast<int>(subset.size()) < fitter->MinSamples()) {
-        ++result.num_tracks_lost;
-        continue;
-      }
-      const RansacReport<PlaneModel> report = run_ransac(&subset);
-      if (!report.success) {
-        ++result.num_tracks_lost;
-        continue;
-      }
-      const Consensus consensus = post_process(report);
-      int subset_inliers = 0;
-      for (int j : subset) subset_inliers += consensus.mask[j] ? 1 : 0;
-      ExtractedPlane plane = make_plane(consensus, track.track_id, /*tracked=*/true);
-      plane.track_subset_size = static_cast<int>(subset.size());
-      plane.track_subset_inliers = subset_inliers;
-      if (track.m_later.has_value() && plane.m_later.has_value() && used_motion != nullptr) {
-        // The remembered plane, m_e . X_e = 1 in this pair's earlier frame,
-        // moved into the later one: X_e = R X_l + t gives
-        // m_l = R^T m_e / (1 - m_e . t) (|t| = 1 per pair: consecutive pairs
-        // span the same number of frames, so their units agree to within the
-        // change of speed).
-        const Rigid3d earlier_from_later = used_motion->later_from_earlier.Inverse();
-        const double denom = 1.0 - track.m_later->dot(earlier_from_later.translation);
-        if (denom > 0.0) {
-          const Eigen::Vector3d m_pred =
-              earlier_from_later.R().transpose() * *track.m_later / denom;
-          plane.track_change = (*plane.m_later - m_pred).norm() / m_pred.norm();
-        }
-      }
-      if (static_cast<int>(plane.mb_indices.size()) < min_mbs ||
-          subset_inliers < options_.min_track_overlap * static_cast<double>(subset.size()) ||
-          plane.track_change > options_.max_track_change || !orientation_ok(plane)) {
-        ++result.num_tracks_lost;
-        continue;
-      }
-      result.planes.push_back(std::move(plane));
-      remove_points(consensus.mask, nullptr);
-    }
-  }
-
-  // 2. Discovery of new planes.
-  std::vector<int> set_aside;  // inliers of models whose largest component was too small
+// Step 2 of the file comment: sequential RANSAC on what remains.
+void PlaneExtractor::DiscoverPlanes(PairFit* fit, PlaneExtractionResult* result,
+                                    std::vector<int>* set_aside) {
+  const int min_mbs = MinMbs(*fit);
   int failed_discoveries = 0;
-  while (static_cast<int>(result.planes.size()) < options_.max_planes &&
-         static_cast<int>(remaining.size()) >= fitter->MinSamples()) {
-    const RansacReport<PlaneModel> report = run_ransac(nullptr);
+  while (static_cast<int>(result->planes.size()) < options_.max_planes &&
+         static_cast<int>(fit->remaining().size()) >= fit->MinSamples()) {
+    const RansacReport<PlaneModel> report = fit->Ransac(nullptr);
     if (!report.success) break;
-    const Consensus consensus = post_process(report);
-    ExtractedPlane plane = make_plane(consensus, next_track_id_, /*tracked=*/false);
+    const PairFit::Consensus consensus = fit->PostProcess(report);
+    ExtractedPlane plane = fit->MakePlane(consensus, next_track_id_, /*tracked=*/false);
     const bool too_small = static_cast<int>(plane.mb_indices.size()) < min_mbs;
-    if (too_small || !orientation_ok(plane)) {
+    if (too_small || !OrientationOk(plane)) {
       // Too small. Without connectivity the best model is the biggest there
       // is: stop. With it, the model's inliers may be scattered blocks; set
       // them aside and look for a compact plane among the rest. The same
@@ -549,25 +635,23 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
         break;
       }
       ++failed_discoveries;
-      remove_points(report.inlier_mask, &set_aside);
+      fit->RemovePoints(report.inlier_mask, set_aside);
       continue;
     }
     failed_discoveries = 0;
     ++next_track_id_;
-    result.planes.push_back(std::move(plane));
-    remove_points(consensus.mask, nullptr);
+    result->planes.push_back(std::move(plane));
+    fit->RemovePoints(consensus.mask, nullptr);
   }
-  result.unassigned_indices = remaining;
-  result.unassigned_indices.insert(result.unassigned_indices.end(), set_aside.begin(),
-                                   set_aside.end());
-  std::sort(result.unassigned_indices.begin(), result.unassigned_indices.end());
+}
 
-  // The road planes' normals refine the vertical (a running mean, weighted
-  // by blocks; a new estimate moves it by at most half).
+// The road planes' normals refine the vertical (a running mean, weighted by
+// blocks; a new estimate moves it by at most half).
+void PlaneExtractor::LearnVertical(const PlaneExtractionResult& result) {
   Eigen::Vector3d road_sum = Eigen::Vector3d::Zero();
   double road_blocks = 0;
   for (const ExtractedPlane& plane : result.planes) {
-    if (!plane.m_later.has_value() || !(plane.m_later->norm() > 0) || !is_road(plane)) continue;
+    if (!plane.m_later.has_value() || !(plane.m_later->norm() > 0) || !IsRoad(plane)) continue;
     const Eigen::Vector3d n = plane.m_later->normalized();
     road_sum += static_cast<double>(plane.mb_indices.size()) * (n.dot(down_) >= 0 ? n : -n);
     road_blocks += static_cast<double>(plane.mb_indices.size());
@@ -577,17 +661,6 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
     down_ = ((1.0 - weight) * down_ + weight * road_sum.normalized()).normalized();
     vertical_learnt_ = true;
   }
-
-  // 3. Remember the planes' MB cells in this pair's later anchor.
-  tracks_.clear();
-  for (const ExtractedPlane& plane : result.planes) {
-    tracks_.push_back({plane.track_id,
-                       std::set<int>(plane.mb_indices.begin(), plane.mb_indices.end()),
-                       plane.m_later});
-  }
-  has_previous_ = true;
-  last_later_index_ = pair.later_index;
-  return result;
 }
 
 }  // namespace slapse

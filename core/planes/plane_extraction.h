@@ -1,5 +1,6 @@
-// Multi-plane homography RANSAC with plane tracking (ALGORITHM.md §4, paper
-// Sec. V-C), in streaming form: one call per anchor pair, in display order.
+// Multi-plane homography RANSAC with plane tracking (paper Sec. V-C;
+// docs/METHOD.md "Plane extraction"), in streaming form: one call per anchor
+// pair, in display order.
 //
 // Homography convention: x_earlier ~ H_earlier_from_later * x_later (pixels,
 // homogeneous), as in the paper's x_k ~ H x^c_{k+1}. A correspondence is an
@@ -16,9 +17,8 @@
 //  1. Tracking (only when pair.earlier_index equals the previous pair's
 //     later_index): each remembered plane owns a set of MB cells of that anchor,
 //     which is this pair's earlier anchor. Its sampling subset is the remaining
-//     correspondences whose x_earlier_px falls into one of those cells (16x16
-//     cells, cell (c, r) covers pixels [16c - 0.5, 16c + 15.5) x [16r - 0.5, ...)
-//     in the pixel-centres-on-integers convention). RANSAC samples only from the
+//     correspondences whose x_earlier_px falls into one of those cells (the
+//     MB grid of core/common/mb_grid.h). RANSAC samples only from the
 //     subset and scores on all remaining correspondences. The track continues
 //     (same track_id, tracked = true) iff the plane has >= min_mbs_per_plane MBs
 //     AND at least min_track_overlap of the subset are its inliers. Scoring on
@@ -125,7 +125,8 @@ struct PlaneExtractionOptions {
   // walls and the horizontal road. A motion-constrained plane (m_later) is
   // kept only if its unit normal n is within max_facade_tilt_deg of
   // horizontal (|n . down| <= sin: a wall) or within max_road_tilt_deg of
-  // the vertical (|n . down| >= cos: the road). `down` is the vertical in
+  // down (n . down >= cos: the road below the camera, the one road test of
+  // core/common/road.h; a ceiling is no road). `down` is the vertical in
   // the camera frame: the camera's y axis at first (a camera mounted about
   // level), then learnt from the road planes found (the mean of their
   // normals, moved with each pair's rotation), so a pitched camera is
@@ -235,11 +236,25 @@ class PlaneExtractor {
   const Eigen::Vector3d& vertical_down() const { return down_; }
 
  private:
+  class PairFit;  // one Process call's working set (plane_extraction.cc)
   struct Track {
     int track_id;
     std::set<int> mb_cells;  // MB indices in the anchor with display index last_later_index_
     std::optional<Eigen::Vector3d> m_later;  // the plane in that anchor's frame, if known
   };
+
+  // Process's steps.
+  static StatusOr<std::vector<int>> ValidatedKept(const AnchorPair& pair,
+                                                  const std::vector<int>& kept_indices);
+  void TrackPlanes(const AnchorPair& pair, const PairMotion* motion, PairFit* fit,
+                   PlaneExtractionResult* result);
+  void DiscoverPlanes(PairFit* fit, PlaneExtractionResult* result, std::vector<int>* set_aside);
+  void LearnVertical(const PlaneExtractionResult& result);
+  static double TrackChange(const Eigen::Vector3d& m_remembered, const Eigen::Vector3d& m_later,
+                            const PairMotion& motion);
+  int MinMbs(const PairFit& fit) const;  // MBs a plane needs
+  bool IsRoad(const ExtractedPlane& plane) const;         // m_later set and non-zero
+  bool OrientationOk(const ExtractedPlane& plane) const;  // the street-scene prior
 
   PlaneExtractionOptions options_;
   std::vector<Track> tracks_;

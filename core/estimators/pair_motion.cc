@@ -1,0 +1,370 @@
+#include "core/estimators/pair_motion.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include <Eigen/Geometry>
+#include <Eigen/SVD>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core.hpp>
+
+#include "core/common/so3.h"
+#include "core/estimators/ransac.h"
+#include "core/estimators/relative_pose.h"
+
+namespace slapse {
+namespace {
+
+// Rotation-only model for Ransac<>: Y ~ R X for rays X (earlier camera) and Y
+// (later camera), both K^{-1} [u, v, 1] (z = 1).
+// Estimate: Kabsch / orthogonal Procrustes on the unit bearings, i.e. the R
+// maximising sum_i yhat_i^T R xhat_i (2 points minimal, least squares for more).
+// Residual: squared error on the normalised image plane z = 1,
+// ||dehom(R x) - dehom(y)||^2; +infinity when (R x)_z <= 0.
+struct RotationOnlyEstimator {
+  using X_t = Eigen::Vector3d;
+  using Y_t = Eigen::Vector3d;
+  using M_t = Eigen::Matrix3d;
+  static constexpr int kMinNumSamples = 2;
+
+  static void Estimate(const std::vector<X_t>& X, const std::vector<Y_t>& Y,
+                       std::vector<M_t>* models) {
+    models->clear();
+    if (X.size() < kMinNumSamples || X.size() != Y.size()) return;
+    Eigen::Matrix3d M = Eigen::Matrix3d::Zero();
+    for (size_t i = 0; i < X.size(); ++i) {
+      M += Y[i].normalized() * X[i].normalized().transpose();
+    }
+    Eigen::JacobiSVD<Eigen::Matrix3d> svd(M, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    // Two independent directions are needed: rank(M) >= 2.
+    if (!(svd.singularValues()(1) > 1e-9 * svd.singularValues()(0))) return;
+    Eigen::Matrix3d D = Eigen::Matrix3d::Identity();
+    D(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0 ? -1.0 : 1.0;
+    models->push_back(svd.matrixU() * D * svd.matrixV().transpose());
+  }
+
+  static void Residuals(const std::vector<X_t>& X, const std::vector<Y_t>& Y, const M_t& R,
+                        std::vector<double>* squared_residuals) {
+    squared_residuals->resize(X.size());
+    for (size_t i = 0; i < X.size(); ++i) {
+      const Eigen::Vector3d p = R * X[i];
+      (*squared_residuals)[i] = p.z() > 1e-12 ? (p.hnormalized() - Y[i].hnormalized()).squaredNorm()
+                                              : std::numeric_limits<double>::infinity();
+    }
+  }
+};
+
+Status ValidateInputs(const std::vector<Correspondence>& correspondences,
+                      const Intrinsics& intrinsics, const PairMotionOptions& options) {
+  SLAPSE_RETURN_IF_ERROR(ValidateIntrinsics(intrinsics, "EstimatePairMotion: intrinsics"));
+  SLAPSE_RETURN_IF_ERROR(options.Check("EstimatePairMotion"));
+  for (size_t i = 0; i < correspondences.size(); ++i) {
+    if (!correspondences[i].x_later_px.allFinite() ||
+        !correspondences[i].x_earlier_px.allFinite()) {
+      return InvalidArgumentError("EstimatePairMotion: correspondence " + std::to_string(i) +
+                                  " has non-finite coordinates");
+    }
+  }
+  return Status::Ok();
+}
+
+// Rotation-only outliers (off R_rot by >= min_parallax_px, or all points when
+// there is no rotation model) and how many of them are E-inliers.
+void CountParallax(const std::vector<Correspondence>& correspondences, const Eigen::Matrix3d& K,
+                   const Eigen::Matrix3d& K_inv, const Eigen::Matrix3d* R_rot,
+                   const std::vector<char>& e_inlier_mask, double min_parallax_px,
+                   int* num_rotation_outliers, int* num_parallax_inliers) {
+  *num_rotation_outliers = *num_parallax_inliers = 0;
+  const Eigen::Matrix3d KRrot = R_rot != nullptr ? Eigen::Matrix3d(K * *R_rot * K_inv) : K;
+  for (size_t i = 0; i < correspondences.size(); ++i) {
+    if (R_rot != nullptr && RotationOnlyParallaxPx(KRrot, correspondences[i]) < min_parallax_px) {
+      continue;
+    }
+    ++*num_rotation_outliers;
+    *num_parallax_inliers += e_inlier_mask[i];
+  }
+}
+
+// Correspondences whose Sampson distance under later_from_earlier is <= max_error
+// (normalised units).
+int CountSampsonInliers(const std::vector<Eigen::Vector3d>& rays_earlier,
+                        const std::vector<Eigen::Vector3d>& rays_later,
+                        const Rigid3d& later_from_earlier, double max_error) {
+  const Eigen::Matrix3d E = Skew(later_from_earlier.translation) * later_from_earlier.R();
+  int count = 0;
+  for (size_t i = 0; i < rays_earlier.size(); ++i) {
+    count += std::abs(SampsonDistance(E, rays_earlier[i], rays_later[i])) <= max_error ? 1 : 0;
+  }
+  return count;
+}
+
+// What both paths share: the rays, K and the thresholds.
+struct MotionProblem {
+  MotionProblem(const std::vector<Correspondence>& c, const Intrinsics& k,
+                const PairMotionOptions& o)
+      : correspondences(c), intrinsics(k), options(o) {}
+  const std::vector<Correspondence>& correspondences;
+  const Intrinsics& intrinsics;
+  const PairMotionOptions& options;
+  Eigen::Matrix3d K, K_inv;
+  std::vector<Eigen::Vector3d> rays_earlier, rays_later;
+  double normalised_threshold = 0.0;  // ransac_threshold_px / mean focal length
+  double min_parallax_px = 0.0;       // max(min_parallax_px, ransac_threshold_px)
+  RansacOptions rotation_ransac;
+};
+
+// Seeded fast path (a prior given and options.use_prior). The motion of
+// consecutive anchor pairs changes slowly, so the previous pair's motion is a
+// good start: RefineRelativePose (core/estimators/relative_pose.h:
+// Levenberg-Marquardt on the Sampson distance over R and t on the unit sphere,
+// with LO-style inlier re-selection at 3, 2, 1.5, 1 x ransac_threshold_px)
+// refines it, and the rotation-only model is polished (LO, no random search)
+// from the refined R and the prior's R instead of a full RANSAC. The result is
+// accepted only if
+//  - its Sampson-inlier share (|r| f_mean <= ransac_threshold_px) is at least
+//    prior_min_inlier_ratio x the prior's reference_inlier_ratio (the share of
+//    the last full fit, so a refinement stuck in a worse local optimum is
+//    caught), and
+//  - it decides has_motion = true with a margin: (a) and (b) of FullPath's
+//    comment with prior_decision_margin x min_correspondences, (c) with
+//    prior_decision_margin x min_parallax_inlier_ratio, and cheirality for at
+//    least half the E-inliers.
+// Otherwise everything is recomputed by the full path (USAC_MAGSAC, the
+// rotation-only RANSAC): the fast path never decides "no motion", so the
+// degenerate cases keep the full logic. With the fast path, e_inlier_mask holds
+// the Sampson inliers of the refined motion and num_cheirality_inliers comes
+// from CountCheirality (recoverPose's test, own triangulation).
+// Returns true when it was accepted and filled `result`.
+bool SeededFastPath(const MotionProblem& p, const PairMotionPrior& prior,
+                    PairMotionReport* result) {
+  const int n = static_cast<int>(p.correspondences.size());
+  RelativePoseRefineOptions refine_options;
+  refine_options.max_error = p.normalised_threshold;
+  const RelativePoseRefineReport refined =
+      RefineRelativePose(p.rays_earlier, p.rays_later, prior.later_from_earlier, refine_options);
+  if (!refined.success ||
+      !(refined.num_inliers >= p.options.prior_min_inlier_ratio * prior.reference_inlier_ratio * n)) {
+    return false;
+  }
+  const int cheirality = CountCheirality(p.rays_earlier, p.rays_later, refined.later_from_earlier,
+                                         refined.inlier_mask);
+  const RansacReport<Eigen::Matrix3d> rotation =
+      Ransac<RotationOnlyEstimator>(p.rotation_ransac)
+          .Polish(p.rays_earlier, p.rays_later,
+                  {refined.later_from_earlier.R(), prior.later_from_earlier.R()});
+  int rotation_outliers = 0, parallax_inliers = 0;
+  CountParallax(p.correspondences, p.K, p.K_inv, rotation.success ? &rotation.model : nullptr,
+                refined.inlier_mask, p.min_parallax_px, &rotation_outliers, &parallax_inliers);
+  const double margin = p.options.prior_decision_margin;
+  if (!(rotation.success && cheirality >= margin * p.options.min_correspondences &&
+        cheirality >= 0.5 * refined.num_inliers &&
+        parallax_inliers >= margin * p.options.min_correspondences &&
+        parallax_inliers >=
+            std::min(1.0, margin * p.options.min_parallax_inlier_ratio) * rotation_outliers)) {
+    return false;
+  }
+  result->has_motion = true;
+  result->motion_from_prior = true;
+  result->rotation_source = PairRotationSource::kEssential;
+  result->later_from_earlier = refined.later_from_earlier;
+  result->R_later_from_earlier = refined.later_from_earlier.R();
+  result->e_inlier_mask = refined.inlier_mask;
+  result->num_e_inliers = refined.num_inliers;
+  result->num_sampson_inliers = refined.num_inliers;
+  result->num_cheirality_inliers = cheirality;
+  result->num_rotation_outliers = rotation_outliers;
+  result->num_parallax_inliers = parallax_inliers;
+  return true;
+}
+
+// Full path, the essential matrix (EstimatePairMotion without a prior, or
+// when the prior is refused):
+//   cv::findEssentialMat(x_earlier, x_later, K, cv::USAC_MAGSAC, confidence,
+//   ransac_threshold_px) and cv::recoverPose (cheirality), which give
+//   later_from_earlier with |t| = 1. Pixels go in directly with K; OpenCV turns
+//   the threshold into normalised units by the mean focal length. USAC_MAGSAC,
+//   not cv::RANSAC: the latter returns a minimal-sample E, whose R is off by
+//   ~0.1 deg on the synthetic street (0.25 px noise) -- 0.8 px of fake parallax
+//   at f = 457 px, which alone pushes far points over tau_inf = 1 px. MAGSAC's
+//   polished E gives ~0.01-0.02 deg. OpenCV's USAC seeds its RNG with a fixed
+//   state, so the result is deterministic.
+// Points1 = earlier and points2 = later, so OpenCV's (R, t) is
+// later_from_earlier. Fills the E-inlier mask and cheirality count of
+// `result`; *have_e when E gave a finite pose with t != 0.
+Status EssentialMotion(const MotionProblem& p, PairMotionReport* result, bool* have_e,
+                       Eigen::Matrix3d* R_e, Eigen::Vector3d* t_e) {
+  const int n = static_cast<int>(p.correspondences.size());
+  const std::vector<Correspondence>& corr = p.correspondences;
+  std::vector<cv::Point2d> pts_earlier(n), pts_later(n);
+  for (int i = 0; i < n; ++i) {
+    pts_earlier[i] = {corr[i].x_earlier_px.x(), corr[i].x_earlier_px.y()};
+    pts_later[i] = {corr[i].x_later_px.x(), corr[i].x_later_px.y()};
+  }
+  const Intrinsics& k = p.intrinsics;
+  const cv::Mat K_cv =
+      (cv::Mat_<double>(3, 3) << k.fx_px, 0, k.cx_px, 0, k.fy_px, k.cy_px, 0, 0, 1);
+  *have_e = false;
+  try {
+    cv::Mat e_mask;
+    const cv::Mat E =
+        cv::findEssentialMat(pts_earlier, pts_later, K_cv, cv::USAC_MAGSAC, p.options.confidence,
+                             p.options.ransac_threshold_px, 1000, e_mask);
+    // findEssentialMat may stack several 3x3 solutions; the first is the best.
+    if (!e_mask.empty() && e_mask.type() != CV_8U) e_mask.convertTo(e_mask, CV_8U);
+    if (E.cols == 3 && E.rows >= 3 && e_mask.total() == static_cast<size_t>(n)) {
+      for (int i = 0; i < n; ++i) {
+        result->e_inlier_mask[i] = e_mask.at<uchar>(i) != 0 ? 1 : 0;
+        result->num_e_inliers += result->e_inlier_mask[i];
+      }
+      cv::Mat pose_mask = e_mask.clone();
+      cv::Mat R_cv, t_cv;
+      result->num_cheirality_inliers = cv::recoverPose(E.rowRange(0, 3), pts_earlier, pts_later,
+                                                       K_cv, R_cv, t_cv, pose_mask);
+      R_cv.convertTo(R_cv, CV_64F);
+      t_cv.convertTo(t_cv, CV_64F);
+      for (int r = 0; r < 3; ++r) {
+        (*t_e)(r) = t_cv.at<double>(r);
+        for (int c = 0; c < 3; ++c) (*R_e)(r, c) = R_cv.at<double>(r, c);
+      }
+      *have_e = R_e->allFinite() && t_e->allFinite() && t_e->norm() > 0.0;
+    }
+  } catch (const cv::Exception& e) {
+    return InternalError(std::string("EstimatePairMotion: OpenCV failed: ") + e.what());
+  }
+  return Status::Ok();
+}
+
+// Degenerate epipolar geometry (has_motion = false, no error). With no or too
+// little translation, E is undetermined (every t fits a pure rotation), and the
+// R from recoverPose may be the wrong member of the twisted pair. So a
+// rotation-only model is fitted as well: our Ransac<> over 2-point Kabsch fits
+// on the bearing vectors, with the residual in pixels approximated as the mean
+// focal length times the normalised-image-plane error. Translation counts as
+// observed iff (a) cheirality holds for >= min_correspondences points, (b) at
+// least min_correspondences E-inliers deviate from that rotation-only model by
+// >= max(min_parallax_px, ransac_threshold_px) (parallax that E explains), and
+// (c) those are at least min_parallax_inlier_ratio of all points the
+// rotation-only model does not explain. (c) matters: under a pure rotation E is
+// free to pick the t that makes the most *wrong* MVs look epipolar-consistent;
+// with half the MVs wrong (+-32 px) that is 20-30 points with cheirality --
+// above any sensible absolute count -- but < 10% of them, while genuine
+// parallax points are almost all E-inliers. Otherwise has_motion = false,
+// later_from_earlier = (R_rotation_only, 0) -- or the identity when even that
+// fit fails or there are fewer than max(min_correspondences, 5) correspondences
+// (then nothing is estimated). Tests (a)-(c) are the has_motion decision below.
+Status FullPath(const MotionProblem& p, PairMotionReport* result) {
+  const RansacReport<Eigen::Matrix3d> rotation =
+      Ransac<RotationOnlyEstimator>(p.rotation_ransac).Estimate(p.rays_earlier, p.rays_later);
+  bool have_e = false;
+  Eigen::Matrix3d R_e = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d t_e = Eigen::Vector3d::Zero();
+  SLAPSE_RETURN_IF_ERROR(EssentialMotion(p, result, &have_e, &R_e, &t_e));
+
+  // Translation is observed when enough E-inliers carry parallax that the
+  // rotation-only model cannot explain.
+  CountParallax(p.correspondences, p.K, p.K_inv, rotation.success ? &rotation.model : nullptr,
+                result->e_inlier_mask, p.min_parallax_px, &result->num_rotation_outliers,
+                &result->num_parallax_inliers);
+  const PairMotionOptions& o = p.options;
+  result->has_motion = have_e && result->num_cheirality_inliers >= o.min_correspondences &&
+                       result->num_parallax_inliers >= o.min_correspondences &&
+                       result->num_parallax_inliers >=
+                           o.min_parallax_inlier_ratio * result->num_rotation_outliers;
+  if (result->has_motion) {
+    result->rotation_source = PairRotationSource::kEssential;
+    result->later_from_earlier = Rigid3d(R_e, t_e.normalized());
+    result->R_later_from_earlier = R_e;
+    result->num_sampson_inliers = CountSampsonInliers(
+        p.rays_earlier, p.rays_later, result->later_from_earlier, p.normalised_threshold);
+  } else if (rotation.success) {
+    result->rotation_source = PairRotationSource::kRotationOnly;
+    result->later_from_earlier = Rigid3d(rotation.model, Eigen::Vector3d::Zero());
+    result->R_later_from_earlier = rotation.model;
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
+Status PairMotionOptions::Check(const std::string& who) const {
+  if (!(ransac_threshold_px > 0.0) || !(confidence > 0.0 && confidence < 1.0) ||
+      !(min_parallax_inlier_ratio >= 0.0 && min_parallax_inlier_ratio <= 1.0) ||
+      !(prior_min_inlier_ratio >= 0.0) || !(prior_decision_margin >= 1.0)) {
+    return InvalidArgumentError(who +
+                                ": ransac_threshold_px must be > 0, confidence in (0, 1), "
+                                "min_parallax_inlier_ratio in [0, 1], prior_min_inlier_ratio >= 0 "
+                                "and prior_decision_margin >= 1");
+  }
+  return Status::Ok();
+}
+
+double RotationOnlyParallaxPx(const Eigen::Matrix3d& KRKinv, const Correspondence& c) {
+  const Eigen::Vector3d p = KRKinv * c.x_earlier_px.homogeneous();
+  if (!(p.z() > 0.0)) return std::numeric_limits<double>::infinity();
+  return (p.hnormalized() - c.x_later_px).norm();
+}
+
+StatusOr<PairMotionReport> EstimatePairMotion(const std::vector<Correspondence>& correspondences,
+                                              const Intrinsics& intrinsics,
+                                              const PairMotionOptions& options,
+                                              double min_parallax_px,
+                                              const PairMotionPrior* prior) {
+  SLAPSE_RETURN_IF_ERROR(ValidateInputs(correspondences, intrinsics, options));
+  const int n = static_cast<int>(correspondences.size());
+  PairMotionReport result;
+  result.e_inlier_mask.assign(n, 0);
+  // The 5-point solver needs 5 points whatever min_correspondences says.
+  if (n < std::max(options.min_correspondences, 5)) return result;
+
+  MotionProblem p(correspondences, intrinsics, options);
+  p.K = intrinsics.K();
+  p.K_inv = p.K.inverse();
+  p.rays_earlier.resize(n);
+  p.rays_later.resize(n);
+  for (int i = 0; i < n; ++i) {
+    p.rays_earlier[i] = p.K_inv * correspondences[i].x_earlier_px.homogeneous();
+    p.rays_later[i] = p.K_inv * correspondences[i].x_later_px.homogeneous();
+  }
+  const double mean_focal_px = 0.5 * (intrinsics.fx_px + intrinsics.fy_px);
+  p.normalised_threshold = options.ransac_threshold_px / mean_focal_px;
+  p.rotation_ransac.max_error = p.normalised_threshold;
+  p.rotation_ransac.confidence = options.confidence;
+  p.min_parallax_px = std::max(min_parallax_px, options.ransac_threshold_px);
+
+  if (prior != nullptr && options.use_prior &&
+      prior->later_from_earlier.translation.norm() > 0.0 &&
+      prior->later_from_earlier.translation.allFinite() && SeededFastPath(p, *prior, &result)) {
+    return result;
+  }
+  SLAPSE_RETURN_IF_ERROR(FullPath(p, &result));
+  return result;
+}
+
+const PairMotionPrior* PairMotionPriorTracker::PriorFor(const AnchorPair& pair) const {
+  return prior_.has_value() && pair.earlier_index == later_index_ ? &*prior_ : nullptr;
+}
+
+void PairMotionPriorTracker::Record(const AnchorPair& pair, const PairMotionReport* result) {
+  if (result == nullptr || !result->has_motion || pair.correspondences.empty()) {
+    Reset();
+    return;
+  }
+  const PairMotionPrior* used = PriorFor(pair);
+  PairMotionPrior prior;
+  prior.later_from_earlier = result->later_from_earlier;
+  prior.reference_inlier_ratio =
+      result->motion_from_prior && used != nullptr
+          ? used->reference_inlier_ratio
+          : static_cast<double>(result->num_sampson_inliers) / pair.correspondences.size();
+  prior_ = prior;
+  later_index_ = pair.later_index;
+}
+
+void PairMotionPriorTracker::Reset() {
+  prior_.reset();
+  later_index_ = -1;
+}
+
+}  // namespace slapse

@@ -1,0 +1,125 @@
+// The front end (core/pipeline/front_end.h) on a simulated MPEG-2 drive: it
+// computes what the stages chained by hand compute (merge, the pair motion
+// seeded by the previous pair's, the plane-at-infinity threshold, extraction),
+// the pipeline's steps carry exactly its planes, and Reset forgets the prior
+// and the tracks.
+#include <optional>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "core/merge/mv_merge.h"
+#include "core/mv/mv_reader.h"
+#include "core/pipeline/front_end.h"
+#include "core/pipeline/pipeline.h"
+#include "core/planes/infinity.h"
+#include "core/planes/plane_extraction.h"
+#include "tests/test_streams.h"
+
+namespace slapse {
+namespace {
+
+class FrontEndTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    auto drive = testing::SimulateTestDrive("front_end", testing::SmallMpeg2DriveOptions(4, 2.0));
+    ASSERT_TRUE(drive.ok()) << drive.status().ToString();
+    drive_ = new testing::TestDrive(*drive);
+  }
+  static void TearDownTestSuite() {
+    delete drive_;
+    drive_ = nullptr;
+  }
+  static std::vector<FrameRecord> Frames() {
+    auto reader = MvReader::Open(drive_->video_path);
+    EXPECT_TRUE(reader.ok()) << reader.status().ToString();
+    std::vector<FrameRecord> frames;
+    FrameRecord f;
+    while ((*reader)->Next(&f).ok()) frames.push_back(f);
+    sigma_px_ = (*reader)->info().mv_sigma_px();
+    return frames;
+  }
+  static testing::TestDrive* drive_;
+  static double sigma_px_;
+};
+testing::TestDrive* FrontEndTest::drive_ = nullptr;
+double FrontEndTest::sigma_px_ = 0.0;
+
+void ExpectSamePlanes(const std::vector<ExtractedPlane>& a, const std::vector<ExtractedPlane>& b) {
+  ASSERT_EQ(a.size(), b.size());
+  for (size_t k = 0; k < a.size(); ++k) {
+    EXPECT_EQ(a[k].track_id, b[k].track_id);
+    EXPECT_EQ(a[k].tracked, b[k].tracked);
+    EXPECT_EQ(a[k].correspondence_indices, b[k].correspondence_indices);
+    EXPECT_EQ(a[k].H_earlier_from_later, b[k].H_earlier_from_later);
+  }
+}
+
+TEST_F(FrontEndTest, ComputesWhatTheStagesChainedByHandCompute) {
+  const std::vector<FrameRecord> frames = Frames();
+  const Intrinsics& k = drive_->intrinsics;
+  FrontEnd front_end(k, sigma_px_);
+  SegmentMerger merger(k.width_px, k.height_px, sigma_px_, MergeOptions());
+  InfinityPriorTracker tracker;
+  PlaneExtractor extractor{PlaneExtractionOptions()};
+  int pairs = 0, seeded = 0, planes = 0;
+  for (const FrameRecord& frame : frames) {
+    std::optional<FrontEndStep> step = front_end.Push(frame);
+    std::optional<AnchorPair> pair = merger.Push(frame);
+    ASSERT_EQ(step.has_value(), pair.has_value());
+    if (!pair.has_value()) continue;
+    ++pairs;
+    auto inf = ThresholdInfinity(pair->correspondences, k, InfinityOptions(),
+                                 tracker.PriorFor(*pair));
+    tracker.Record(*pair, inf.ok() ? &*inf : nullptr);
+    ASSERT_TRUE(inf.ok() && step->infinity.ok());
+    EXPECT_EQ(step->pair.later_index, pair->later_index);
+    EXPECT_EQ(step->infinity->kept_indices, inf->kept_indices);
+    EXPECT_EQ(step->infinity->motion_from_prior, inf->motion_from_prior);
+    seeded += inf->motion_from_prior;
+    auto extraction = extractor.Process(*pair, *inf, k);
+    ASSERT_TRUE(extraction.ok() && step->extraction.ok());
+    ExpectSamePlanes(step->extraction->planes, extraction->planes);
+    planes += static_cast<int>(extraction->planes.size());
+    EXPECT_GE(step->times.merge_ms, 0.0);
+  }
+  EXPECT_GE(pairs, 10);
+  EXPECT_GT(seeded, 0) << "the motion prior was never used";
+  EXPECT_GT(planes, 0);
+}
+
+TEST_F(FrontEndTest, PipelineStepsCarryTheFrontEndsPlanes) {
+  const std::vector<FrameRecord> frames = Frames();
+  FrontEnd front_end(drive_->intrinsics, sigma_px_);
+  Pipeline pipeline(drive_->intrinsics, sigma_px_);
+  for (const FrameRecord& frame : frames) {
+    std::optional<FrontEndStep> front = front_end.Push(frame);
+    auto step = pipeline.Push(frame);
+    ASSERT_TRUE(step.ok());
+    ASSERT_EQ(front.has_value(), step->has_value());
+    if (!front.has_value()) continue;
+    ASSERT_TRUE(front->infinity.ok() && front->extraction.ok());
+    EXPECT_EQ((*step)->kept, static_cast<int>(front->infinity->kept_indices.size()));
+    ExpectSamePlanes((*step)->extracted, front->extraction->planes);
+  }
+}
+
+TEST_F(FrontEndTest, ResetForgetsThePriorAndTheTracks) {
+  const std::vector<FrameRecord> frames = Frames();
+  FrontEnd front_end(drive_->intrinsics, sigma_px_);
+  int pairs = 0;
+  for (const FrameRecord& frame : frames) {
+    std::optional<FrontEndStep> step = front_end.Push(frame);
+    if (!step.has_value()) continue;
+    if (++pairs == 6) front_end.Reset();  // the next frame starts a new segment
+    if (pairs == 7) {
+      ASSERT_TRUE(step->infinity.ok() && step->extraction.ok());
+      EXPECT_FALSE(step->infinity->motion_from_prior);
+      for (const ExtractedPlane& p : step->extraction->planes) EXPECT_FALSE(p.tracked);
+    }
+  }
+  EXPECT_GE(pairs, 7);
+}
+
+}  // namespace
+}  // namespace slapse
