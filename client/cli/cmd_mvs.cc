@@ -76,42 +76,49 @@ double Median(std::vector<double>& v) {
 }  // namespace
 
 int RunMvs(int argc, char** argv) {
-  Flags flags("mvs", "INPUT [options]   (INPUT: a file path or URL)",
-              {{"csv", "FILE", "write every MV as CSV ('-' = stdout)", ""},
-               {"json", "FILE", "write one JSON object per frame ('-' = stdout)", ""},
-               {"draw", "FRAME", "draw the MVs of this display-order frame over it", ""},
-               {"png", "FILE", "where --draw writes its picture", "mv_overlay.png"},
-               {"arrow-scale", "X", "arrow length per pixel of motion in the picture", "2"},
-               {"format", "NAME", "force the input format (mpegts, h264, ...)", ""},
-               {"quiet", "", "do not print the summary", ""}});
-  if (Status s = flags.Parse(argc, argv); !s.ok()) return Fail("mvs", s.message(), 2);
-  if (flags.help_requested()) {
-    std::printf("%s", flags.Usage().c_str());
-    return 0;
-  }
-  if (flags.positional().size() != 1) return Fail("mvs", "expected one INPUT (see --help)", 2);
-  const std::string input = flags.positional()[0];
+  CommandLine cl("mvs", "INPUT [options]   (INPUT: a file path or URL)", "INPUT");
+  CLI::App& app = cl.app();
+  std::string csv_path, json_path, png = "mv_overlay.png";
   int64_t draw_frame = -1;
-  if (flags.Has("draw")) {
-    auto v = flags.GetInt("draw", 0, INT64_MAX);
-    if (!v.ok()) return Fail("mvs", v.status().message(), 2);
-    draw_frame = *v;
+  MvOverlayOptions overlay;
+  MvReaderOptions options;
+  bool quiet = false;
+  app.add_option("--csv", csv_path, "write every MV as CSV ('-' = stdout)")->type_name("FILE");
+  app.add_option("--json", json_path, "write one JSON object per frame ('-' = stdout)")
+      ->type_name("FILE");
+  app.add_option("--draw", draw_frame, "draw the MVs of this display-order frame over it")
+      ->type_name("FRAME");
+  app.add_option("--png", png, "where --draw writes its picture")
+      ->type_name("FILE")
+      ->capture_default_str();
+  app.add_option("--arrow-scale", overlay.arrow_scale,
+                 "arrow length per pixel of motion in the picture")
+      ->type_name("X")
+      ->capture_default_str();
+  app.add_option("--format", options.format, "force the input format (mpegts, h264, ...)")
+      ->type_name("NAME");
+  app.add_flag("--quiet", quiet, "do not print the summary");
+  if (int rc = cl.Parse(argc, argv); rc >= 0) return rc;
+  if (cl.positional().size() != 1) return Fail("mvs", "expected one INPUT (see --help)", 2);
+  const std::string input = cl.positional()[0];
+  if (cl.Has("draw")) {
+    if (Status s = CheckRange("draw", draw_frame, int64_t{0}, INT64_MAX); !s.ok()) {
+      return Fail("mvs", s.message(), 2);
+    }
   }
-  auto arrow_scale = flags.GetDouble("arrow-scale", 0.1, 100.0);
-  if (!arrow_scale.ok()) return Fail("mvs", arrow_scale.status().message(), 2);
+  if (Status s = CheckRange("arrow-scale", overlay.arrow_scale, 0.1, 100.0); !s.ok()) {
+    return Fail("mvs", s.message(), 2);
+  }
 
   Output csv, json;
-  if (flags.Has("csv")) {
-    if (!csv.Open(flags.GetString("csv")))
-      return Fail("mvs", "cannot write " + flags.GetString("csv"));
+  if (cl.Has("csv")) {
+    if (!csv.Open(csv_path)) return Fail("mvs", "cannot write " + csv_path);
     *csv.get() << "frame,timestamp_s,type,direction,x_px,y_px,dx_px,dy_px,w_px,h_px\n";
   }
-  if (flags.Has("json") && !json.Open(flags.GetString("json"))) {
-    return Fail("mvs", "cannot write " + flags.GetString("json"));
+  if (cl.Has("json") && !json.Open(json_path)) {
+    return Fail("mvs", "cannot write " + json_path);
   }
 
-  MvReaderOptions options;
-  options.format = flags.GetString("format");
   options.keep_luma = draw_frame >= 0;
   const auto t0 = std::chrono::steady_clock::now();
   auto reader = MvReader::Open(input, options);
@@ -132,12 +139,10 @@ int RunMvs(int argc, char** argv) {
     if (csv.get() != nullptr) WriteCsv(*csv.get(), f);
     if (json.get() != nullptr) WriteJsonLine(*json.get(), f);
     if (f.index == draw_frame) {
-      MvOverlayOptions overlay;
-      overlay.arrow_scale = *arrow_scale;
       const cv::Mat picture =
           DrawMotionVectors(f, (*reader)->info().width_px, (*reader)->info().height_px, overlay);
-      if (!cv::imwrite(flags.GetString("png"), picture)) {
-        return Fail("mvs", "cannot write " + flags.GetString("png"));
+      if (!cv::imwrite(png, picture)) {
+        return Fail("mvs", "cannot write " + png);
       }
       drawn = true;
       options.keep_luma = false;
@@ -147,7 +152,7 @@ int RunMvs(int argc, char** argv) {
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   const StreamInfo& info = (*reader)->info();
   const ReadStats& stats = (*reader)->stats();
-  if (!flags.GetBool("quiet")) {
+  if (!quiet) {
     std::printf("input      %s (%s, %s, %dx%d @ %.2f fps)\n", input.c_str(),
                 info.format_name.c_str(), info.codec_name.c_str(), info.width_px, info.height_px,
                 info.fps);
@@ -177,7 +182,7 @@ int RunMvs(int argc, char** argv) {
     std::printf("speed      %.3f s, %.0f frames/s (open + demux + decode + MV export)\n", seconds,
                 stats.frames / std::max(seconds, 1e-9));
     if (drawn)
-      std::printf("picture    %s (frame %lld)\n", flags.GetString("png").c_str(),
+      std::printf("picture    %s (frame %lld)\n", png.c_str(),
                   static_cast<long long>(draw_frame));
   }
   if (draw_frame >= 0 && !drawn) {

@@ -38,75 +38,55 @@ Status WriteResults(const Pipeline& pipeline, const std::string& dir) {
 }  // namespace
 
 int RunRun(int argc, char** argv) {
-  Flags flags(
-      "run", "INPUT [options]   (INPUT: a file path or URL)",
-      {{"intrinsics", "SPEC",
-        "FILE.json, 'fx,fy,cx,cy' or 'hfov=DEG' (default: intrinsics.json beside INPUT)", ""},
-       {"out", "DIR", "output directory", "out/run"},
-       {"gt", "DIR", "a simulated drive's directory: print errors, draw the truth", ""},
-       {"first-step-m", "M", "metric scale: length of the first tracked step", ""},
-       {"speed-kmh", "V", "metric scale: speed at the start", ""},
-       {"camera-height-m", "H", "metric scale: camera height above the road plane", ""},
-       {"eps-h", "PX", "homography inlier threshold", "1"},
-       {"steps-csv", "FILE", "also write one CSV row per anchor pair: its planes and the filter's",
-        ""},
-       {"quiet", "", "no progress line", ""}});
-  if (Status s = flags.Parse(argc, argv); !s.ok()) return Fail("run", s.message(), 2);
-  if (flags.help_requested()) {
-    std::printf("%s", flags.Usage().c_str());
-    return 0;
-  }
-  if (flags.positional().size() != 1) return Fail("run", "expected one INPUT (see --help)", 2);
-  const std::string input = flags.positional()[0];
+  CommandLine cl("run", "INPUT [options]   (INPUT: a file path or URL)", "INPUT");
+  CLI::App& app = cl.app();
   PipelineOptions po;
-  auto eps = flags.GetDouble("eps-h", 0.05, 100);
-  if (!eps.ok()) return Fail("run", eps.status().message(), 2);
-  po.extraction.eps_h_px = *eps;
-  int scale_sources = 0;
-  if (flags.Has("first-step-m")) {
-    auto v = flags.GetDouble("first-step-m", 1e-3, 1e3);
-    if (!v.ok()) return Fail("run", v.status().message(), 2);
-    po.scale.source = ScaleOptions::Source::kFirstStep;
-    po.scale.first_step_m = *v;
-    ++scale_sources;
+  std::string intrinsics_spec, gt_dir, steps_csv_path, out_dir = "out/run";
+  app.add_option("--intrinsics", intrinsics_spec,
+                 "FILE.json, 'fx,fy,cx,cy' or 'hfov=DEG' (default: intrinsics.json beside INPUT)")
+      ->type_name("SPEC");
+  app.add_option("--out", out_dir, "output directory")->type_name("DIR")->capture_default_str();
+  app.add_option("--gt", gt_dir, "a simulated drive's directory: print errors, draw the truth")
+      ->type_name("DIR");
+  ScaleFlags scale_flags;
+  scale_flags.AddTo(&cl);
+  app.add_option("--eps-h", po.extraction.eps_h_px, "homography inlier threshold")
+      ->type_name("PX")
+      ->capture_default_str();
+  app.add_option("--steps-csv", steps_csv_path,
+                 "also write one CSV row per anchor pair: its planes and the filter's")
+      ->type_name("FILE");
+  bool quiet = false;
+  app.add_flag("--quiet", quiet, "no progress line");
+  if (int rc = cl.Parse(argc, argv); rc >= 0) return rc;
+  if (cl.positional().size() != 1) return Fail("run", "expected one INPUT (see --help)", 2);
+  const std::string input = cl.positional()[0];
+  if (Status s = CheckRange("eps-h", po.extraction.eps_h_px, 0.05, 100); !s.ok()) {
+    return Fail("run", s.message(), 2);
   }
-  if (flags.Has("speed-kmh")) {
-    auto v = flags.GetDouble("speed-kmh", 0.1, 500);
-    if (!v.ok()) return Fail("run", v.status().message(), 2);
-    po.scale.source = ScaleOptions::Source::kSpeed;
-    po.scale.speed_mps = *v / 3.6;
-    ++scale_sources;
-  }
-  if (flags.Has("camera-height-m")) {
-    auto v = flags.GetDouble("camera-height-m", 0.05, 100);
-    if (!v.ok()) return Fail("run", v.status().message(), 2);
-    po.scale.source = ScaleOptions::Source::kCameraHeight;
-    po.scale.camera_height_m = *v;
-    ++scale_sources;
-  }
-  if (scale_sources > 1) return Fail("run", "give at most one scale source", 2);
+  auto scale = scale_flags.Options();
+  if (!scale.ok()) return Fail("run", scale.status().message(), 2);
+  po.scale = *scale;
 
   std::optional<GroundTruth> gt;
-  if (flags.Has("gt")) {
-    auto loaded = LoadGroundTruth(flags.GetString("gt"));
+  if (cl.Has("gt")) {
+    auto loaded = LoadGroundTruth(gt_dir);
     if (!loaded.ok()) return Fail("run", "--gt: " + loaded.status().ToString(), 2);
     gt = std::move(*loaded);
   }
   auto reader = MvReader::Open(input);
   if (!reader.ok()) return Fail("run", reader.status().ToString());
   const StreamInfo& info = (*reader)->info();
-  auto intrinsics =
-      IntrinsicsFor(flags.GetString("intrinsics"), input, info.width_px, info.height_px);
+  auto intrinsics = IntrinsicsFor(intrinsics_spec, input, info.width_px, info.height_px);
   if (!intrinsics.ok()) return Fail("run", intrinsics.status().message(), 2);
-  const std::string out_dir = flags.GetString("out");
   std::error_code ec;
   std::filesystem::create_directories(out_dir, ec);
   if (ec) return Fail("run", "cannot create " + out_dir + ": " + ec.message());
 
   std::unique_ptr<std::FILE, int (*)(std::FILE*)> steps_csv(nullptr, &std::fclose);
-  if (flags.Has("steps-csv")) {
-    steps_csv.reset(std::fopen(flags.GetString("steps-csv").c_str(), "w"));
-    if (!steps_csv) return Fail("run", "cannot write " + flags.GetString("steps-csv"));
+  if (cl.Has("steps-csv")) {
+    steps_csv.reset(std::fopen(steps_csv_path.c_str(), "w"));
+    if (!steps_csv) return Fail("run", "cannot write " + steps_csv_path);
     std::fprintf(
         steps_csv.get(),
         "later_index,tracking,step_length,kept,filter_planes,updated,added,removed,rejected,"
@@ -114,7 +94,7 @@ int RunRun(int argc, char** argv) {
   }
   Pipeline pipeline(*intrinsics, info.mv_sigma_px(), po);
   std::vector<PlaneEstimate> plane_estimates;
-  const bool progress = !flags.GetBool("quiet") && isatty(STDERR_FILENO);
+  const bool progress = !quiet && isatty(STDERR_FILENO);
   int steps = 0, tracked = 0;
   FrameRecord frame;
   Status end;
