@@ -3,10 +3,10 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <fstream>
 #include <map>
 #include <optional>
 
+#include "core/common/json_io.h"
 #include "core/common/so3.h"
 #include "core/common/timing.h"
 #include "core/estimators/epipolar_plane.h"
@@ -24,14 +24,10 @@ double AngleDeg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
 
 // The video of a drive directory: meta.json names it; default drive.ts.
 std::string VideoOf(const std::string& dir) {
-  std::ifstream meta(dir + "/meta.json");
-  std::string line;
-  while (std::getline(meta, line)) {
-    const size_t k = line.find("\"video\"");
-    if (k == std::string::npos) continue;
-    const size_t a = line.find('"', line.find(':', k) + 1), b = line.find('"', a + 1);
-    if (a != std::string::npos && b != std::string::npos)
-      return dir + "/" + line.substr(a + 1, b - a - 1);
+  std::string video;
+  if (auto meta = ReadJsonFile(dir + "/meta.json");
+      meta.ok() && GetString(*meta, "video", dir + "/meta.json", &video).ok()) {
+    return dir + "/" + video;
   }
   return dir + "/drive.ts";
 }

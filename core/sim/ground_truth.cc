@@ -1,8 +1,8 @@
 // Reading and writing the ground truth of a simulated drive (formats in ground_truth.h).
 //
-// JSON is written by hand (numbers with 17 significant digits, so doubles
-// round-trip exactly) and read back with cv::FileStorage. Text files are
-// parsed line by line; lines starting with '#' are comments.
+// JSON goes through nlohmann::json (core/common/json_io.h), numbers with 17
+// significant digits so doubles round-trip exactly. Text files are parsed
+// line by line; lines starting with '#' are comments.
 #include "core/sim/ground_truth.h"
 
 #include <cmath>
@@ -11,7 +11,7 @@
 #include <fstream>
 #include <sstream>
 
-#include <opencv2/core.hpp>
+#include "core/common/json_io.h"
 
 namespace slapse {
 
@@ -68,10 +68,6 @@ std::string Num(double v) {
   return buf;
 }
 
-std::string Vec(const Eigen::Vector3d& v) {
-  return "[" + Num(v.x()) + ", " + Num(v.y()) + ", " + Num(v.z()) + "]";
-}
-
 Status WriteFile(const std::filesystem::path& path, const std::string& text) {
   std::ofstream out(path, std::ios::binary | std::ios::trunc);
   if (!out) return UnavailableError("cannot open " + path.string() + " for writing");
@@ -108,33 +104,75 @@ Status CheckFinite(const GroundTruth& gt) {
   return Status::Ok();
 }
 
-// Runs `fn` (which reads with cv::FileStorage) and turns OpenCV exceptions into a Status.
-template <typename Fn>
-Status ReadJson(const std::filesystem::path& path, Fn fn) {
-  if (!std::filesystem::exists(path)) return NotFoundError("missing " + path.string());
-  try {
-    cv::FileStorage fs(path.string(), cv::FileStorage::READ | cv::FileStorage::FORMAT_JSON);
-    if (!fs.isOpened()) return DataLossError("cannot parse " + path.string());
-    return fn(fs);
-  } catch (const cv::Exception& e) {
-    return DataLossError("cannot parse " + path.string() + ": " + e.what());
-  }
+Json Vec(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
+
+Status ReadVec3(const Json& obj, const std::string& key, const std::string& where,
+                Eigen::Vector3d* out) {
+  return GetNumbers(obj, key, where, 3, out->data());
 }
 
-Status ReadNumber(const cv::FileNode& node, const std::string& what, double* out) {
-  if (node.empty() || (!node.isReal() && !node.isInt())) {
-    return DataLossError("missing or non-numeric '" + what + "'");
-  }
-  *out = static_cast<double>(node);
-  return Status::Ok();
+StatusOr<PlaneKind> ParsePlaneKind(const std::string& kind, const std::string& where) {
+  if (kind == "road") return PlaneKind::kRoad;
+  if (kind == "facade") return PlaneKind::kFacade;
+  if (kind == "background") return PlaneKind::kBackground;
+  return DataLossError(where + ": unknown kind '" + kind + "'");
 }
 
-Status ReadVec3(const cv::FileNode& node, const std::string& what, Eigen::Vector3d* out) {
-  if (!node.isSeq() || node.size() != 3) return DataLossError("'" + what + "' is not a 3-vector");
-  for (int k = 0; k < 3; ++k) {
-    double v;
-    SLAPSE_RETURN_IF_ERROR(ReadNumber(node[k], what, &v));
-    (*out)[k] = v;
+// One element of planes.json's "planes".
+StatusOr<GtPlane> ReadPlane(const Json& node, const std::string& where) {
+  GtPlane p;
+  SLAPSE_RETURN_IF_ERROR(GetInt(node, "id", where, &p.id));
+  std::string kind;
+  SLAPSE_RETURN_IF_ERROR(GetString(node, "kind", where, &kind));
+  auto parsed = ParsePlaneKind(kind, where);
+  if (!parsed.ok()) return parsed.status();
+  p.kind = *parsed;
+  SLAPSE_RETURN_IF_ERROR(ReadVec3(node, "normal_world", where, &p.normal_world));
+  SLAPSE_RETURN_IF_ERROR(GetNumber(node, "distance_m", where, &p.distance_m));
+  const auto polys = node.find("polygons");
+  if (polys == node.end()) return p;
+  if (!polys->is_array()) return DataLossError(where + ": key 'polygons' is not a list");
+  for (size_t i = 0; i < polys->size(); ++i) {
+    const Json& poly = (*polys)[i];
+    const std::string at = where + ": polygons[" + std::to_string(i) + "]";
+    if (!poly.is_array()) return DataLossError(at + " is not a list");
+    std::vector<Eigen::Vector3d> vs;
+    for (const Json& v : poly) {
+      bool ok = v.is_array() && v.size() == 3;
+      for (size_t k = 0; ok && k < 3; ++k) ok = v[k].is_number();
+      if (!ok) return DataLossError(at + ": a vertex is not a list of 3 numbers");
+      vs.emplace_back(v[0].get<double>(), v[1].get<double>(), v[2].get<double>());
+    }
+    p.polygons_world.push_back(std::move(vs));
+  }
+  return p;
+}
+
+Status LoadIntrinsics(const std::filesystem::path& path, Intrinsics* k) {
+  auto doc = ReadJsonFile(path.string());
+  if (!doc.ok()) return doc.status();
+  const std::string where = path.string();
+  SLAPSE_RETURN_IF_ERROR(GetNumber(*doc, "fx_px", where, &k->fx_px));
+  SLAPSE_RETURN_IF_ERROR(GetNumber(*doc, "fy_px", where, &k->fy_px));
+  SLAPSE_RETURN_IF_ERROR(GetNumber(*doc, "cx_px", where, &k->cx_px));
+  SLAPSE_RETURN_IF_ERROR(GetNumber(*doc, "cy_px", where, &k->cy_px));
+  SLAPSE_RETURN_IF_ERROR(GetInt(*doc, "width_px", where, &k->width_px));
+  return GetInt(*doc, "height_px", where, &k->height_px);
+}
+
+Status LoadPlanes(const std::filesystem::path& path, std::vector<GtPlane>* planes) {
+  auto doc = ReadJsonFile(path.string());
+  if (!doc.ok()) return doc.status();
+  const auto list = doc->find("planes");
+  if (list == doc->end()) return Status::Ok();
+  if (!list->is_array()) return DataLossError(path.string() + ": key 'planes' is not a list");
+  for (size_t i = 0; i < list->size(); ++i) {
+    auto p = ReadPlane((*list)[i], path.string() + ": planes[" + std::to_string(i) + "]");
+    if (!p.ok()) return p.status();
+    if (p->id != static_cast<int>(planes->size())) {
+      return DataLossError(path.string() + ": plane ids must be 0, 1, 2, ... in order");
+    }
+    planes->push_back(std::move(*p));
   }
   return Status::Ok();
 }
@@ -169,30 +207,32 @@ Status SaveGroundTruth(const GroundTruth& gt, const std::string& dir) {
   SLAPSE_RETURN_IF_ERROR(WriteFile(root / "trajectory_tum.txt", traj.str()));
 
   const Intrinsics& k = gt.intrinsics;
-  std::ostringstream intr;
-  intr << "{\n  \"fx_px\": " << Num(k.fx_px) << ",\n  \"fy_px\": " << Num(k.fy_px)
-       << ",\n  \"cx_px\": " << Num(k.cx_px) << ",\n  \"cy_px\": " << Num(k.cy_px)
-       << ",\n  \"width_px\": " << k.width_px << ",\n  \"height_px\": " << k.height_px << "\n}\n";
-  SLAPSE_RETURN_IF_ERROR(WriteFile(root / "intrinsics.json", intr.str()));
+  Json intr;
+  intr["fx_px"] = k.fx_px;
+  intr["fy_px"] = k.fy_px;
+  intr["cx_px"] = k.cx_px;
+  intr["cy_px"] = k.cy_px;
+  intr["width_px"] = k.width_px;
+  intr["height_px"] = k.height_px;
+  SLAPSE_RETURN_IF_ERROR(WriteFile(root / "intrinsics.json", DumpJson(intr, ExactNumber)));
 
-  std::ostringstream planes;
-  planes << "{\n  \"planes\": [";
-  for (size_t i = 0; i < gt.planes.size(); ++i) {
-    const GtPlane& p = gt.planes[i];
-    planes << (i ? ",\n" : "\n") << "    {\"id\": " << p.id << ", \"kind\": \""
-           << PlaneKindName(p.kind) << "\", \"normal_world\": " << Vec(p.normal_world)
-           << ", \"distance_m\": " << Num(p.distance_m) << ",\n     \"polygons\": [";
-    for (size_t j = 0; j < p.polygons_world.size(); ++j) {
-      planes << (j ? ",\n       [" : "\n       [");
-      for (size_t v = 0; v < p.polygons_world[j].size(); ++v) {
-        planes << (v ? ", " : "") << Vec(p.polygons_world[j][v]);
-      }
-      planes << "]";
+  Json planes;
+  Json& list = planes["planes"] = Json::array();
+  for (const GtPlane& p : gt.planes) {
+    Json plane;
+    plane["id"] = p.id;
+    plane["kind"] = PlaneKindName(p.kind);
+    plane["normal_world"] = Vec(p.normal_world);
+    plane["distance_m"] = p.distance_m;
+    Json& polygons = plane["polygons"] = Json::array();
+    for (const auto& poly : p.polygons_world) {
+      Json vertices = Json::array();
+      for (const Eigen::Vector3d& v : poly) vertices.push_back(Vec(v));
+      polygons.push_back(std::move(vertices));
     }
-    planes << "]}";
+    list.push_back(std::move(plane));
   }
-  planes << "\n  ]\n}\n";
-  SLAPSE_RETURN_IF_ERROR(WriteFile(root / "planes.json", planes.str()));
+  SLAPSE_RETURN_IF_ERROR(WriteFile(root / "planes.json", DumpJson(planes, ExactNumber)));
 
   std::ostringstream mb;
   mb << "# frame_index mb_cols mb_rows labels... (row-major; plane id >= 0, " << kMbSky << " sky, "
@@ -217,69 +257,20 @@ Status SaveGroundTruth(const GroundTruth& gt, const std::string& dir) {
   SLAPSE_RETURN_IF_ERROR(WriteFile(root / "mb_mixed.txt", mixed.str()));
 
   // Minimal meta.json; SimulateDrive replaces it with a superset.
-  std::ostringstream meta;
-  meta << "{\n  \"fps\": " << Num(gt.fps) << ",\n  \"frames\": " << gt.frames.size()
-       << ",\n  \"mb_cols\": " << gt.mb_cols << ",\n  \"mb_rows\": " << gt.mb_rows << "\n}\n";
-  return WriteFile(root / "meta.json", meta.str());
+  Json meta;
+  meta["fps"] = gt.fps;
+  meta["frames"] = gt.frames.size();
+  meta["mb_cols"] = gt.mb_cols;
+  meta["mb_rows"] = gt.mb_rows;
+  return WriteFile(root / "meta.json", DumpJson(meta, ExactNumber));
 }
 
 StatusOr<GroundTruth> LoadGroundTruth(const std::string& dir) {
   const std::filesystem::path root(dir);
   GroundTruth gt;
 
-  SLAPSE_RETURN_IF_ERROR(ReadJson(root / "intrinsics.json", [&](cv::FileStorage& fs) {
-    Intrinsics& k = gt.intrinsics;
-    SLAPSE_RETURN_IF_ERROR(ReadNumber(fs["fx_px"], "fx_px", &k.fx_px));
-    SLAPSE_RETURN_IF_ERROR(ReadNumber(fs["fy_px"], "fy_px", &k.fy_px));
-    SLAPSE_RETURN_IF_ERROR(ReadNumber(fs["cx_px"], "cx_px", &k.cx_px));
-    SLAPSE_RETURN_IF_ERROR(ReadNumber(fs["cy_px"], "cy_px", &k.cy_px));
-    double w, h;
-    SLAPSE_RETURN_IF_ERROR(ReadNumber(fs["width_px"], "width_px", &w));
-    SLAPSE_RETURN_IF_ERROR(ReadNumber(fs["height_px"], "height_px", &h));
-    k.width_px = static_cast<int>(w);
-    k.height_px = static_cast<int>(h);
-    return Status::Ok();
-  }));
-
-  SLAPSE_RETURN_IF_ERROR(ReadJson(root / "planes.json", [&](cv::FileStorage& fs) {
-    const cv::FileNode planes = fs["planes"];
-    if (!planes.isSeq() && !planes.empty()) return DataLossError("'planes' is not a list");
-    for (const cv::FileNode& node : planes) {
-      GtPlane p;
-      double id;
-      SLAPSE_RETURN_IF_ERROR(ReadNumber(node["id"], "id", &id));
-      p.id = static_cast<int>(id);
-      const std::string kind = node["kind"].empty() ? "" : node["kind"].string();
-      if (kind == "road") {
-        p.kind = PlaneKind::kRoad;
-      } else if (kind == "facade") {
-        p.kind = PlaneKind::kFacade;
-      } else if (kind == "background") {
-        p.kind = PlaneKind::kBackground;
-      } else {
-        return DataLossError("plane " + std::to_string(p.id) + " has unknown kind '" + kind + "'");
-      }
-      SLAPSE_RETURN_IF_ERROR(ReadVec3(node["normal_world"], "normal_world", &p.normal_world));
-      SLAPSE_RETURN_IF_ERROR(ReadNumber(node["distance_m"], "distance_m", &p.distance_m));
-      const cv::FileNode polys = node["polygons"];
-      if (!polys.empty() && !polys.isSeq()) return DataLossError("'polygons' is not a list");
-      for (const cv::FileNode& poly : polys) {
-        if (!poly.isSeq()) return DataLossError("a polygon is not a list");
-        std::vector<Eigen::Vector3d> vs;
-        for (const cv::FileNode& v : poly) {
-          Eigen::Vector3d x;
-          SLAPSE_RETURN_IF_ERROR(ReadVec3(v, "polygon vertex", &x));
-          vs.push_back(x);
-        }
-        p.polygons_world.push_back(std::move(vs));
-      }
-      if (p.id != static_cast<int>(gt.planes.size())) {
-        return DataLossError("planes.json: plane ids must be 0, 1, 2, ... in order");
-      }
-      gt.planes.push_back(std::move(p));
-    }
-    return Status::Ok();
-  }));
+  SLAPSE_RETURN_IF_ERROR(LoadIntrinsics(root / "intrinsics.json", &gt.intrinsics));
+  SLAPSE_RETURN_IF_ERROR(LoadPlanes(root / "planes.json", &gt.planes));
 
   {
     const auto path = root / "trajectory_tum.txt";
@@ -373,9 +364,12 @@ StatusOr<GroundTruth> LoadGroundTruth(const std::string& dir) {
   }
 
   // fps from meta.json, else from the timestamps.
-  Status meta = ReadJson(root / "meta.json", [&](cv::FileStorage& fs) {
-    return ReadNumber(fs["fps"], "fps", &gt.fps);
-  });
+  Status meta = Status::Ok();
+  if (auto doc = ReadJsonFile((root / "meta.json").string()); doc.ok()) {
+    meta = GetNumber(*doc, "fps", (root / "meta.json").string(), &gt.fps);
+  } else {
+    meta = doc.status();
+  }
   if (!meta.ok() && meta.code() != StatusCode::kNotFound) return meta;
   if (!meta.ok() && gt.frames.size() >= 2) {
     const double span = gt.frames.back().timestamp_s - gt.frames.front().timestamp_s;
