@@ -12,6 +12,7 @@
 
 #include "client/cli/commands.h"
 #include "client/cli/flags.h"
+#include "core/common/json_io.h"
 #include "core/mv/mv_reader.h"
 #include "core/viz/mv_overlay.h"
 
@@ -48,23 +49,29 @@ void WriteCsv(std::ostream& os, const FrameRecord& f) {
   }
 }
 
+// The numbers of --json: the timestamp to the microsecond; each MV as
+// [x_px, y_px, dx_px, dy_px, w_px, h_px, direction], positions to 0.1 px and
+// displacements to 0.001 px (the sizes and direction are integers).
+std::string MvsJsonNumber(const std::string& key, size_t index, double v) {
+  if (key == "mvs") return FormatDouble(index < 2 ? "%.1f" : "%.3f", v);
+  return FormatDouble("%.6f", v);
+}
+
 void WriteJsonLine(std::ostream& os, const FrameRecord& f) {
-  char head[200];
-  std::snprintf(head, sizeof(head),
-                "{\"index\":%lld,\"timestamp_s\":%.6f,\"type\":\"%c\",\"prev_anchor\":%lld,"
-                "\"next_anchor\":%lld,\"corrupt\":%s,\"mvs\":[",
-                static_cast<long long>(f.index), f.timestamp_s, PictureTypeChar(f.type),
-                static_cast<long long>(f.prev_anchor_index),
-                static_cast<long long>(f.next_anchor_index), f.corrupt ? "true" : "false");
-  os << head;
-  char item[120];
-  for (size_t i = 0; i < f.mvs.size(); ++i) {
-    const MotionVector& mv = f.mvs[i];
-    std::snprintf(item, sizeof(item), "%s[%.1f,%.1f,%.3f,%.3f,%d,%d,%d]", i ? "," : "", mv.x_px,
-                  mv.y_px, mv.dx_px, mv.dy_px, mv.w_px, mv.h_px, static_cast<int>(mv.direction));
-    os << item;
+  Json line;
+  line["index"] = static_cast<long long>(f.index);
+  line["timestamp_s"] = f.timestamp_s;
+  line["type"] = std::string(1, PictureTypeChar(f.type));
+  line["prev_anchor"] = static_cast<long long>(f.prev_anchor_index);
+  line["next_anchor"] = static_cast<long long>(f.next_anchor_index);
+  line["corrupt"] = f.corrupt;
+  Json& mvs = line["mvs"] = Json::array();
+  for (const MotionVector& mv : f.mvs) {
+    mvs.push_back({static_cast<double>(mv.x_px), static_cast<double>(mv.y_px),
+                   static_cast<double>(mv.dx_px), static_cast<double>(mv.dy_px), mv.w_px, mv.h_px,
+                   static_cast<int>(mv.direction)});
   }
-  os << "]}\n";
+  os << DumpJsonLine(line, MvsJsonNumber) << "\n";
 }
 
 double Median(std::vector<double>& v) {

@@ -8,17 +8,19 @@
 namespace slapse {
 namespace {
 
-void DumpInline(const Json& j, const std::string& key, const NumberFormat& format,
-                std::string* out) {
+// `j` on one line; `key` names the member it is in, `index` its place in an array.
+// `comma` and `colon` separate elements and keys from values.
+void DumpInline(const Json& j, const std::string& key, size_t index, const NumberFormat& format,
+                const char* comma, const char* colon, std::string* out) {
   switch (j.type()) {
     case Json::value_t::object: {
       *out += "{";
       bool first = true;
       for (const auto& [k, v] : j.items()) {
-        *out += first ? "" : ", ";
+        *out += first ? "" : comma;
         first = false;
-        *out += Json(k).dump() + ": ";
-        DumpInline(v, k, format, out);
+        *out += Json(k).dump() + colon;
+        DumpInline(v, k, 0, format, comma, colon, out);
       }
       *out += "}";
       return;
@@ -26,14 +28,14 @@ void DumpInline(const Json& j, const std::string& key, const NumberFormat& forma
     case Json::value_t::array: {
       *out += "[";
       for (size_t i = 0; i < j.size(); ++i) {
-        *out += i ? ", " : "";
-        DumpInline(j[i], key, format, out);
+        *out += i ? comma : "";
+        DumpInline(j[i], key, i, format, comma, colon, out);
       }
       *out += "]";
       return;
     }
     case Json::value_t::number_float:
-      *out += format(key, j.get<double>());
+      *out += format(key, index, j.get<double>());
       return;
     default:  // strings (escaped), integers, booleans, null: as nlohmann writes them
       *out += j.dump();
@@ -49,7 +51,9 @@ std::string FormatDouble(const char* printf_format, double v) {
   return buf;
 }
 
-std::string ExactNumber(const std::string& /*key*/, double v) { return FormatDouble("%.17g", v); }
+std::string ExactNumber(const std::string& /*key*/, size_t /*index*/, double v) {
+  return FormatDouble("%.17g", v);
+}
 
 std::string DumpJson(const Json& doc, const NumberFormat& format) {
   std::string out = "{";
@@ -59,17 +63,23 @@ std::string DumpJson(const Json& doc, const NumberFormat& format) {
     first = false;
     out += Json(key).dump() + ": ";
     if (!value.is_array()) {
-      DumpInline(value, key, format, &out);
+      DumpInline(value, key, 0, format, ", ", ": ", &out);
       continue;
     }
     out += "[";
     for (size_t i = 0; i < value.size(); ++i) {
       out += i ? ",\n    " : "\n    ";
-      DumpInline(value[i], key, format, &out);
+      DumpInline(value[i], key, i, format, ", ", ": ", &out);
     }
     out += "\n  ]";
   }
   out += "\n}\n";
+  return out;
+}
+
+std::string DumpJsonLine(const Json& doc, const NumberFormat& format) {
+  std::string out;
+  DumpInline(doc, "", 0, format, ",", ":", &out);
   return out;
 }
 

@@ -32,17 +32,21 @@ namespace slapse {
 // Members keep their insertion order, as the files have always had them.
 using Json = nlohmann::ordered_json;
 
-// Text of a floating-point value `v` inside the member named `key`.
-using NumberFormat = std::function<std::string(const std::string& key, double v)>;
+// Text of a floating-point value `v` inside the member named `key`, at
+// position `index` of the innermost array holding it (0 outside arrays).
+using NumberFormat = std::function<std::string(const std::string& key, size_t index, double v)>;
 
 // printf-formats `v` (e.g. FormatDouble("%.6f", v)).
 std::string FormatDouble(const char* printf_format, double v);
 
 // "%.17g" for every key: doubles round-trip exactly.
-std::string ExactNumber(const std::string& key, double v);
+std::string ExactNumber(const std::string& key, size_t index, double v);
 
 // `doc` (an object) in the layout above, ending in a newline.
 std::string DumpJson(const Json& doc, const NumberFormat& format);
+
+// `doc` on one line without spaces ({"k":1,"v":[0.5,2]}), no newline: JSON lines.
+std::string DumpJsonLine(const Json& doc, const NumberFormat& format);
 
 // Parses `path`: NOT_FOUND if it does not exist, DATA_LOSS (naming the file,
 // with nlohmann's reason) if it is not JSON or not an object.

@@ -39,7 +39,7 @@ namespace {
 
 // planes.json's numbers have always had fixed decimals by member: these keep
 // its bytes (nlohmann alone would print shortest round-trip forms).
-std::string ResultNumber(const std::string& key, double v) {
+std::string ResultNumber(const std::string& key, size_t /*index*/, double v) {
   if (key == "t" || key == "q") return FormatDouble("%.9f", v);
   if (key == "first_seen_s" || key == "last_seen_s") return FormatDouble("%.3f", v);
   return FormatDouble("%.6f", v);  // timestamp_s, normal_world, distance
