@@ -1,5 +1,5 @@
 // Accuracy of an estimated trajectory and plane map against ground truth
-// (paper Sec. VII, ALGORITHM.md §6), plus the standard ATE/RPE.
+// (paper Sec. VII; how they are reported: docs/TRAJECTORY.md), plus the standard ATE/RPE.
 #pragma once
 
 #include <map>
@@ -9,15 +9,10 @@
 
 #include "core/common/rigid3.h"
 #include "core/common/status.h"
+#include "core/common/timed_pose.h"
 #include "core/sim/ground_truth.h"
 
 namespace slapse {
-
-struct TimedPose {
-  int64_t index = -1;  // frame index shared by the estimate and the truth
-  double timestamp_s = 0.0;
-  Rigid3d world_from_cam;
-};
 
 // Similarity transform b_from_a: x_b = s R x_a + t.
 struct Sim3d {

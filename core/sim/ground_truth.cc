@@ -12,6 +12,7 @@
 #include <sstream>
 
 #include "core/common/json_io.h"
+#include "core/common/mb_grid.h"
 
 namespace slapse {
 
@@ -53,7 +54,8 @@ bool GroundTruth::TransferThroughPlane(int plane_id, int frame, int other,
 int GroundTruth::LabelAt(int frame, double x_px, double y_px) const {
   if (frame < 0 || frame >= static_cast<int>(frames.size())) return kMbMixed;
   // Pixel centres are at integers, so macroblock column c covers x in [16c - 0.5, 16c + 15.5).
-  const double fc = std::floor((x_px + 0.5) / 16.0), fr = std::floor((y_px + 0.5) / 16.0);
+  if (!(std::abs(x_px) < 1e9 && std::abs(y_px) < 1e9)) return kMbMixed;  // also NaN
+  const int fc = MbCellOf(x_px), fr = MbCellOf(y_px);
   if (!(fc >= 0 && fc < mb_cols && fr >= 0 && fr < mb_rows)) return kMbMixed;
   const std::vector<int>& labels = frames[frame].mb_labels;
   if (labels.size() != static_cast<size_t>(mb_cols) * mb_rows) return kMbMixed;
@@ -177,6 +179,108 @@ Status LoadPlanes(const std::filesystem::path& path, std::vector<GtPlane>* plane
   return Status::Ok();
 }
 
+// trajectory_tum.txt: one GtFrame per pose line.
+Status LoadTrajectory(const std::filesystem::path& root, GroundTruth* out) {
+  GroundTruth& gt = *out;
+  const auto path = root / "trajectory_tum.txt";
+  std::ifstream in(path);
+  if (!in) return NotFoundError("missing " + path.string());
+  std::string line;
+  int line_no = 0;
+  while (std::getline(in, line)) {
+    ++line_no;
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream ls(line);
+    GtFrame f;
+    double tx, ty, tz, qx, qy, qz, qw;
+    if (!(ls >> f.timestamp_s >> tx >> ty >> tz >> qx >> qy >> qz >> qw)) {
+      return DataLossError(path.string() + ":" + std::to_string(line_no) + ": bad pose line");
+    }
+    f.world_from_cam = Rigid3d(Eigen::Quaterniond(qw, qx, qy, qz), Eigen::Vector3d(tx, ty, tz));
+    gt.frames.push_back(f);
+  }
+  return Status::Ok();
+}
+
+// mb_labels.txt: each frame's macroblock labels (and the grid size).
+Status LoadMbLabels(const std::filesystem::path& root, GroundTruth* out) {
+  GroundTruth& gt = *out;
+  const auto path = root / "mb_labels.txt";
+  std::ifstream in(path);
+  if (!in) return NotFoundError("missing " + path.string());
+  std::string line;
+  size_t frame = 0;
+  int line_no = 0;
+  while (std::getline(in, line)) {
+    ++line_no;
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream ls(line);
+    long index;
+    int cols, rows;
+    const std::string where = path.string() + ":" + std::to_string(line_no);
+    if (!(ls >> index >> cols >> rows) || cols <= 0 || rows <= 0 || cols > 4096 || rows > 4096) {
+      return DataLossError(where + ": bad header");
+    }
+    if (index != static_cast<long>(frame) || frame >= gt.frames.size()) {
+      return DataLossError(where + ": frame index does not match the trajectory");
+    }
+    if (frame == 0) {
+      gt.mb_cols = cols;
+      gt.mb_rows = rows;
+    } else if (cols != gt.mb_cols || rows != gt.mb_rows) {
+      return DataLossError(where + ": macroblock grid changed");
+    }
+    std::vector<int>& labels = gt.frames[frame].mb_labels;
+    labels.resize(static_cast<size_t>(cols) * rows);
+    for (int& l : labels) {
+      if (!(ls >> l)) return DataLossError(where + ": too few labels");
+    }
+    ++frame;
+  }
+  if (frame != gt.frames.size()) {
+    return DataLossError(path.string() + ": " + std::to_string(frame) + " label lines for " +
+                         std::to_string(gt.frames.size()) + " poses");
+  }
+  return Status::Ok();
+}
+
+// mb_mixed.txt: the shares of the mixed blocks. Optional: drives simulated
+// before it existed have no shares.
+Status LoadMixedShares(const std::filesystem::path& root, GroundTruth* out) {
+  GroundTruth& gt = *out;
+  const auto path = root / "mb_mixed.txt";
+  if (!std::filesystem::exists(path)) return Status::Ok();
+  std::ifstream in(path);
+  std::string line;
+  int line_no = 0;
+  while (std::getline(in, line)) {
+    ++line_no;
+    if (line.empty() || line[0] == '#') continue;
+    const std::string where = path.string() + ":" + std::to_string(line_no);
+    std::istringstream ls(line);
+    long frame;
+    int mb_index;
+    if (!(ls >> frame >> mb_index) || frame < 0 || frame >= static_cast<long>(gt.frames.size()) ||
+        mb_index < 0 || mb_index >= gt.mb_cols * gt.mb_rows) {
+      return DataLossError(where + ": bad frame or macroblock index");
+    }
+    std::vector<MbShare>& shares = gt.frames[frame].mixed_shares[mb_index];
+    std::string item;
+    while (ls >> item) {
+      MbShare share;
+      char colon = 0;
+      std::istringstream is(item);
+      if (!(is >> share.label >> colon >> share.share) || colon != ':' ||
+          !(share.share > 0.0f && share.share <= 1.0f)) {
+        return DataLossError(where + ": bad label:share '" + item + "'");
+      }
+      shares.push_back(share);
+    }
+    if (shares.empty()) return DataLossError(where + ": no shares");
+  }
+  return Status::Ok();
+}
+
 }  // namespace
 
 Status SaveGroundTruth(const GroundTruth& gt, const std::string& dir) {
@@ -272,96 +376,9 @@ StatusOr<GroundTruth> LoadGroundTruth(const std::string& dir) {
   SLAPSE_RETURN_IF_ERROR(LoadIntrinsics(root / "intrinsics.json", &gt.intrinsics));
   SLAPSE_RETURN_IF_ERROR(LoadPlanes(root / "planes.json", &gt.planes));
 
-  {
-    const auto path = root / "trajectory_tum.txt";
-    std::ifstream in(path);
-    if (!in) return NotFoundError("missing " + path.string());
-    std::string line;
-    int line_no = 0;
-    while (std::getline(in, line)) {
-      ++line_no;
-      if (line.empty() || line[0] == '#') continue;
-      std::istringstream ls(line);
-      GtFrame f;
-      double tx, ty, tz, qx, qy, qz, qw;
-      if (!(ls >> f.timestamp_s >> tx >> ty >> tz >> qx >> qy >> qz >> qw)) {
-        return DataLossError(path.string() + ":" + std::to_string(line_no) + ": bad pose line");
-      }
-      f.world_from_cam = Rigid3d(Eigen::Quaterniond(qw, qx, qy, qz), Eigen::Vector3d(tx, ty, tz));
-      gt.frames.push_back(f);
-    }
-  }
-
-  {
-    const auto path = root / "mb_labels.txt";
-    std::ifstream in(path);
-    if (!in) return NotFoundError("missing " + path.string());
-    std::string line;
-    size_t frame = 0;
-    int line_no = 0;
-    while (std::getline(in, line)) {
-      ++line_no;
-      if (line.empty() || line[0] == '#') continue;
-      std::istringstream ls(line);
-      long index;
-      int cols, rows;
-      const std::string where = path.string() + ":" + std::to_string(line_no);
-      if (!(ls >> index >> cols >> rows) || cols <= 0 || rows <= 0 || cols > 4096 || rows > 4096) {
-        return DataLossError(where + ": bad header");
-      }
-      if (index != static_cast<long>(frame) || frame >= gt.frames.size()) {
-        return DataLossError(where + ": frame index does not match the trajectory");
-      }
-      if (frame == 0) {
-        gt.mb_cols = cols;
-        gt.mb_rows = rows;
-      } else if (cols != gt.mb_cols || rows != gt.mb_rows) {
-        return DataLossError(where + ": macroblock grid changed");
-      }
-      std::vector<int>& labels = gt.frames[frame].mb_labels;
-      labels.resize(static_cast<size_t>(cols) * rows);
-      for (int& l : labels) {
-        if (!(ls >> l)) return DataLossError(where + ": too few labels");
-      }
-      ++frame;
-    }
-    if (frame != gt.frames.size()) {
-      return DataLossError(path.string() + ": " + std::to_string(frame) + " label lines for " +
-                           std::to_string(gt.frames.size()) + " poses");
-    }
-  }
-
-  // Optional: drives simulated before mb_mixed.txt existed have no shares.
-  if (const auto path = root / "mb_mixed.txt"; std::filesystem::exists(path)) {
-    std::ifstream in(path);
-    std::string line;
-    int line_no = 0;
-    while (std::getline(in, line)) {
-      ++line_no;
-      if (line.empty() || line[0] == '#') continue;
-      const std::string where = path.string() + ":" + std::to_string(line_no);
-      std::istringstream ls(line);
-      long frame;
-      int mb_index;
-      if (!(ls >> frame >> mb_index) || frame < 0 || frame >= static_cast<long>(gt.frames.size()) ||
-          mb_index < 0 || mb_index >= gt.mb_cols * gt.mb_rows) {
-        return DataLossError(where + ": bad frame or macroblock index");
-      }
-      std::vector<MbShare>& shares = gt.frames[frame].mixed_shares[mb_index];
-      std::string item;
-      while (ls >> item) {
-        MbShare share;
-        char colon = 0;
-        std::istringstream is(item);
-        if (!(is >> share.label >> colon >> share.share) || colon != ':' ||
-            !(share.share > 0.0f && share.share <= 1.0f)) {
-          return DataLossError(where + ": bad label:share '" + item + "'");
-        }
-        shares.push_back(share);
-      }
-      if (shares.empty()) return DataLossError(where + ": no shares");
-    }
-  }
+  SLAPSE_RETURN_IF_ERROR(LoadTrajectory(root, &gt));
+  SLAPSE_RETURN_IF_ERROR(LoadMbLabels(root, &gt));
+  SLAPSE_RETURN_IF_ERROR(LoadMixedShares(root, &gt));
 
   // fps from meta.json, else from the timestamps.
   Status meta = Status::Ok();

@@ -11,6 +11,7 @@
 #include <Eigen/LU>
 #include <opencv2/imgproc.hpp>
 
+#include "core/common/mb_grid.h"
 #include "core/common/timing.h"
 #include "core/sim/texture.h"
 
@@ -689,7 +690,7 @@ std::vector<int> MacroblockLabels(const cv::Mat& sample_labels, int supersamplin
   if (mixed_shares != nullptr) mixed_shares->clear();
   const int ss = supersampling;
   const int W = sample_labels.cols / ss, H = sample_labels.rows / ss;
-  const int cols = (W + 15) / 16, rows = (H + 15) / 16;
+  const int cols = MbCount(W), rows = MbCount(H);
   *mb_cols = cols;
   *mb_rows = rows;
   std::vector<int> labels(static_cast<size_t>(cols) * rows, kMbMixed);
@@ -697,8 +698,8 @@ std::vector<int> MacroblockLabels(const cv::Mat& sample_labels, int supersamplin
   for (int by = 0; by < rows; ++by) {
     for (int bx = 0; bx < cols; ++bx) {
       counts.clear();
-      const int y0 = by * 16 * ss, y1 = std::min(H, (by + 1) * 16) * ss;
-      const int x0 = bx * 16 * ss, x1 = std::min(W, (bx + 1) * 16) * ss;
+      const int y0 = by * kMbSizePx * ss, y1 = std::min(H, (by + 1) * kMbSizePx) * ss;
+      const int x0 = bx * kMbSizePx * ss, x1 = std::min(W, (bx + 1) * kMbSizePx) * ss;
       int last = std::numeric_limits<int>::min();
       size_t last_idx = 0;
       for (int y = y0; y < y1; ++y) {
