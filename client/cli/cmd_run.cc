@@ -35,6 +35,115 @@ Status WriteResults(const Pipeline& pipeline, const std::string& dir) {
   });
 }
 
+using CsvFile = std::unique_ptr<std::FILE, int (*)(std::FILE*)>;
+
+// --steps-csv with its header, or null if it cannot be written.
+CsvFile OpenStepsCsv(const std::string& path) {
+  CsvFile csv(std::fopen(path.c_str(), "w"), &std::fclose);
+  if (csv) {
+    std::fprintf(
+        csv.get(),
+        "later_index,tracking,step_length,kept,filter_planes,updated,added,removed,rejected,"
+        "reassociated,reidentified,road_coasting,rms_residual_px,extracted,note\n");
+  }
+  return csv;
+}
+
+// One --steps-csv row for an anchor pair.
+void WriteStepRow(std::FILE* csv, const PipelineStep& s,
+                  const std::vector<Pipeline::TrajectoryPoint>& traj) {
+  // extracted: track_id:MBs:t(racked)/n(ew):track_change, space separated.
+  std::string extracted;
+  for (const ExtractedPlane& ex : s.extracted) {
+    char buf[64];
+    std::snprintf(buf, sizeof(buf), "%s%d:%zu:%c:%.2f", extracted.empty() ? "" : " ", ex.track_id,
+                  ex.mb_indices.size(), ex.tracked ? 't' : 'n', ex.track_change);
+    extracted += buf;
+  }
+  const double length = traj.size() >= 2 ? (traj.back().world_from_cam.translation -
+                                            traj[traj.size() - 2].world_from_cam.translation)
+                                               .norm()
+                                         : 0.0;
+  std::fprintf(csv, "%lld,%d,%.4f,%d,%zu,%d,%d,%d,%d,%d,%d,%d,%.3f,%s,\"%s\"\n",
+               static_cast<long long>(s.later_index), s.tracking ? 1 : 0, length, s.kept,
+               s.planes.size(), s.ekf.planes_updated, s.ekf.planes_added, s.ekf.planes_removed,
+               s.ekf.planes_rejected, s.ekf.planes_reassociated, s.ekf.planes_reidentified,
+               s.ekf.road_coasting ? 1 : 0, s.ekf.rms_residual_px, extracted.c_str(),
+               s.note.c_str());
+}
+
+// The truth in the top-down plot: its path and the facades' footprints on the road.
+void DrawTruth(const GroundTruth& gt, const std::vector<TimedPose>& truth, TopDownPlot* plot) {
+  std::vector<Eigen::Vector2d> gt_path;
+  for (const TimedPose& t : truth) gt_path.push_back(t.world_from_cam.translation.head<2>());
+  plot->AddPath(gt_path, cv::Scalar(60, 60, 60), "ground truth", 2);
+  for (const GtPlane& p : gt.planes) {
+    if (p.kind != PlaneKind::kFacade) continue;
+    for (const auto& poly : p.polygons_world) {
+      for (size_t i = 0; i + 1 < poly.size(); ++i) {
+        if (std::abs(poly[i].z()) < 1e-6 && std::abs(poly[i + 1].z()) < 1e-6) {
+          plot->AddSegment(poly[i].head<2>(), poly[i + 1].head<2>(), cv::Scalar(190, 190, 190), 3);
+        }
+      }
+    }
+  }
+}
+
+void PrintErrors(const TrajectoryErrors& terr, const StatusOr<PlaneMapErrors>& perr) {
+  std::printf("distance   %.1f m over %d poses\n", terr.distance_m, terr.poses);
+  std::printf("eps_D      %.2f %%   (paper: mean relative position error, first-step scale)\n",
+              100 * terr.eps_D);
+  std::printf("ATE        %.3f m   (RMSE after Sim(3) alignment, scale %.3f m/unit)\n",
+              terr.ate_rmse_m, terr.sim3_scale);
+  std::printf("RPE        %.3f m, %.3f deg per anchor step (RMSE)\n", terr.rpe_trans_rmse_m,
+              terr.rpe_rot_rmse_deg);
+  if (perr.ok()) {
+    std::printf("planes     %d evaluated (seen >= 0.5 s): eps_d %.2f m, eps_n %.2f deg\n",
+                perr->planes_evaluated, perr->eps_d_m, perr->eps_n_deg);
+  }
+}
+
+// map.png (the estimate in x-z of its world, the first camera, or aligned to
+// the truth) and, with the truth, the errors on stdout.
+void MapAndErrors(const Pipeline& pipeline, const std::optional<GroundTruth>& gt,
+                  const std::vector<PlaneEstimate>& plane_estimates, const std::string& out_dir) {
+  TopDownPlot plot;
+  const Sim3d* align = nullptr;
+  std::optional<TrajectoryErrors> terr;
+  if (gt.has_value()) {
+    std::vector<TimedPose> est;
+    for (const auto& p : pipeline.trajectory())
+      est.push_back({p.index, p.timestamp_s, p.world_from_cam});
+    const std::vector<TimedPose> truth = TruthPoses(*gt);
+    auto e = EvaluateTrajectory(est, truth);
+    if (e.ok()) {
+      terr = *e;
+      align = &terr->truth_from_estimate;
+      DrawTruth(*gt, truth, &plot);
+    } else {
+      std::printf("errors     not available: %s\n", e.status().ToString().c_str());
+    }
+  }
+  auto to_map = [&](const Eigen::Vector3d& x) -> Eigen::Vector2d {
+    if (align != nullptr) return ((*align) * x).head<2>();
+    return Eigen::Vector2d(x.x(), x.z());  // camera world: x right, z forward
+  };
+  std::vector<Eigen::Vector2d> est_path;
+  for (const auto& p : pipeline.trajectory())
+    est_path.push_back(to_map(p.world_from_cam.translation));
+  for (const auto& [id, mp] : pipeline.plane_map()) {
+    std::vector<Eigen::Vector2d> pts;
+    for (const Eigen::Vector3d& x : mp.support_world) pts.push_back(to_map(x));
+    plot.AddPoints(std::move(pts), TrackColour(id), 1);
+  }
+  plot.AddPath(est_path, cv::Scalar(30, 30, 220), align ? "SLAPSE (Sim(3)-aligned)" : "SLAPSE", 2);
+  const std::string unit = align != nullptr || pipeline.metric() ? "m" : "first steps";
+  cv::imwrite(out_dir + "/map.png", plot.Render(900, 900, "trajectory and plane map", unit));
+  if (terr.has_value()) {
+    PrintErrors(*terr, EvaluatePlaneMap(plane_estimates, *gt, terr->first_step_scale));
+  }
+}
+
 }  // namespace
 
 int RunRun(int argc, char** argv) {
@@ -83,14 +192,10 @@ int RunRun(int argc, char** argv) {
   std::filesystem::create_directories(out_dir, ec);
   if (ec) return Fail("run", "cannot create " + out_dir + ": " + ec.message());
 
-  std::unique_ptr<std::FILE, int (*)(std::FILE*)> steps_csv(nullptr, &std::fclose);
+  CsvFile steps_csv(nullptr, &std::fclose);
   if (cl.Has("steps-csv")) {
-    steps_csv.reset(std::fopen(steps_csv_path.c_str(), "w"));
+    steps_csv = OpenStepsCsv(steps_csv_path);
     if (!steps_csv) return Fail("run", "cannot write " + steps_csv_path);
-    std::fprintf(
-        steps_csv.get(),
-        "later_index,tracking,step_length,kept,filter_planes,updated,added,removed,rejected,"
-        "reassociated,reidentified,road_coasting,rms_residual_px,extracted,note\n");
   }
   Pipeline pipeline(*intrinsics, info.mv_sigma_px(), po);
   std::vector<PlaneEstimate> plane_estimates;
@@ -110,27 +215,7 @@ int RunRun(int argc, char** argv) {
     const PipelineStep& s = **step;
     ++steps;
     tracked += s.tracking;
-    if (steps_csv) {
-      // extracted: track_id:MBs:t(racked)/n(ew):track_change, space separated.
-      std::string extracted;
-      for (const ExtractedPlane& ex : s.extracted) {
-        char buf[64];
-        std::snprintf(buf, sizeof(buf), "%s%d:%zu:%c:%.2f", extracted.empty() ? "" : " ",
-                      ex.track_id, ex.mb_indices.size(), ex.tracked ? 't' : 'n', ex.track_change);
-        extracted += buf;
-      }
-      const auto& traj = pipeline.trajectory();
-      const double length = traj.size() >= 2 ? (traj.back().world_from_cam.translation -
-                                                traj[traj.size() - 2].world_from_cam.translation)
-                                                   .norm()
-                                             : 0.0;
-      std::fprintf(steps_csv.get(), "%lld,%d,%.4f,%d,%zu,%d,%d,%d,%d,%d,%d,%d,%.3f,%s,\"%s\"\n",
-                   static_cast<long long>(s.later_index), s.tracking ? 1 : 0, length, s.kept,
-                   s.planes.size(), s.ekf.planes_updated, s.ekf.planes_added, s.ekf.planes_removed,
-                   s.ekf.planes_rejected, s.ekf.planes_reassociated, s.ekf.planes_reidentified,
-                   s.ekf.road_coasting ? 1 : 0, s.ekf.rms_residual_px, extracted.c_str(),
-                   s.note.c_str());
-    }
+    if (steps_csv) WriteStepRow(steps_csv.get(), s, pipeline.trajectory());
     AppendPlaneEstimates(s.later_index, s.planes, s.extracted, s.extracted_filter_ids,
                          &plane_estimates);
   }
@@ -146,67 +231,7 @@ int RunRun(int argc, char** argv) {
               steps, pipeline.trajectory().size(), pipeline.plane_map().size(),
               pipeline.metric() ? "metres" : "up to scale: first step = 1");
 
-  // Top-down plot: estimate in x-z of its world (first camera), or aligned to the truth.
-  TopDownPlot plot;
-  std::vector<Eigen::Vector2d> est_path;
-  const Sim3d* align = nullptr;
-  std::optional<TrajectoryErrors> terr;
-  if (gt.has_value()) {
-    std::vector<TimedPose> est;
-    for (const auto& p : pipeline.trajectory())
-      est.push_back({p.index, p.timestamp_s, p.world_from_cam});
-    const std::vector<TimedPose> truth = TruthPoses(*gt);
-    auto e = EvaluateTrajectory(est, truth);
-    if (e.ok()) {
-      terr = *e;
-      align = &terr->truth_from_estimate;
-      std::vector<Eigen::Vector2d> gt_path;
-      for (const TimedPose& t : truth) gt_path.push_back(t.world_from_cam.translation.head<2>());
-      plot.AddPath(gt_path, cv::Scalar(60, 60, 60), "ground truth", 2);
-      for (const GtPlane& p : gt->planes) {
-        if (p.kind != PlaneKind::kFacade) continue;
-        for (const auto& poly : p.polygons_world) {
-          for (size_t i = 0; i + 1 < poly.size(); ++i) {
-            if (std::abs(poly[i].z()) < 1e-6 && std::abs(poly[i + 1].z()) < 1e-6) {
-              plot.AddSegment(poly[i].head<2>(), poly[i + 1].head<2>(), cv::Scalar(190, 190, 190),
-                              3);
-            }
-          }
-        }
-      }
-    } else {
-      std::printf("errors     not available: %s\n", e.status().ToString().c_str());
-    }
-  }
-  auto to_map = [&](const Eigen::Vector3d& x) -> Eigen::Vector2d {
-    if (align != nullptr) return ((*align) * x).head<2>();
-    return Eigen::Vector2d(x.x(), x.z());  // camera world: x right, z forward
-  };
-  for (const auto& p : pipeline.trajectory())
-    est_path.push_back(to_map(p.world_from_cam.translation));
-  for (const auto& [id, mp] : pipeline.plane_map()) {
-    std::vector<Eigen::Vector2d> pts;
-    for (const Eigen::Vector3d& x : mp.support_world) pts.push_back(to_map(x));
-    plot.AddPoints(std::move(pts), TrackColour(id), 1);
-  }
-  plot.AddPath(est_path, cv::Scalar(30, 30, 220), align ? "SLAPSE (Sim(3)-aligned)" : "SLAPSE", 2);
-  const std::string unit = align != nullptr || pipeline.metric() ? "m" : "first steps";
-  cv::imwrite(out_dir + "/map.png", plot.Render(900, 900, "trajectory and plane map", unit));
-
-  if (terr.has_value()) {
-    auto perr = EvaluatePlaneMap(plane_estimates, *gt, terr->first_step_scale);
-    std::printf("distance   %.1f m over %d poses\n", terr->distance_m, terr->poses);
-    std::printf("eps_D      %.2f %%   (paper: mean relative position error, first-step scale)\n",
-                100 * terr->eps_D);
-    std::printf("ATE        %.3f m   (RMSE after Sim(3) alignment, scale %.3f m/unit)\n",
-                terr->ate_rmse_m, terr->sim3_scale);
-    std::printf("RPE        %.3f m, %.3f deg per anchor step (RMSE)\n", terr->rpe_trans_rmse_m,
-                terr->rpe_rot_rmse_deg);
-    if (perr.ok()) {
-      std::printf("planes     %d evaluated (seen >= 0.5 s): eps_d %.2f m, eps_n %.2f deg\n",
-                  perr->planes_evaluated, perr->eps_d_m, perr->eps_n_deg);
-    }
-  }
+  MapAndErrors(pipeline, gt, plane_estimates, out_dir);
   std::printf("wrote      %s/{trajectory_tum.txt, trajectory_kitti.txt, planes.json, map.png}\n",
               out_dir.c_str());
   return stream_ok ? 0 : 1;
