@@ -80,6 +80,53 @@ double Median(std::vector<double>& v) {
   return v[v.size() / 2];
 }
 
+// What the summary counts over the stream.
+struct MvCounts {
+  std::map<PictureType, int64_t> type_count;
+  int64_t past = 0, future = 0;
+  std::vector<double> p_motion, b_motion;  // |MV| by the frame type
+
+  void Add(const FrameRecord& f) {
+    ++type_count[f.type];
+    for (const MotionVector& mv : f.mvs) {
+      (mv.direction == RefDirection::kPast ? past : future)++;
+      (f.type == PictureType::kP ? p_motion : b_motion).push_back(std::hypot(mv.dx_px, mv.dy_px));
+    }
+  }
+};
+
+void PrintSummary(const std::string& input, const StreamInfo& info, const ReadStats& stats,
+                  MvCounts& c, double seconds) {
+  std::printf("input      %s (%s, %s, %dx%d @ %.2f fps)\n", input.c_str(),
+              info.format_name.c_str(), info.codec_name.c_str(), info.width_px, info.height_px,
+              info.fps);
+  std::printf(
+      "frames     %lld (I %lld, P %lld, B %lld), n_B = %d, MV precision 1/%d px "
+      "(sigma %.3f px)%s\n",
+      static_cast<long long>(stats.frames), static_cast<long long>(c.type_count[PictureType::kI]),
+      static_cast<long long>(c.type_count[PictureType::kP]),
+      static_cast<long long>(c.type_count[PictureType::kB]), info.max_consecutive_b,
+      info.mv_precision_denom, info.mv_sigma_px(),
+      info.b_frame_mvs ? "" : ", B-frame MVs not exported by this decoder");
+  if (info.b_pyramid || info.extra_references()) {
+    std::printf(
+        "references %s%s%s: FFmpeg does not say which reference a vector uses; slapse "
+        "merges %s\n",
+        info.b_pyramid ? "B-pyramid (B frames are references)" : "",
+        info.b_pyramid && info.extra_references() ? ", " : "",
+        info.extra_references()
+            ? ("up to " + std::to_string(info.max_ref_frames) + " reference frames").c_str()
+            : "",
+        info.b_pyramid ? "direct vectors only" : "vectors as if they used the nearest anchor");
+  }
+  std::printf("vectors    %lld (past %lld, future %lld)\n", static_cast<long long>(c.past + c.future),
+              static_cast<long long>(c.past), static_cast<long long>(c.future));
+  std::printf("|motion|   median %.2f px in P frames, %.2f px in B frames\n", Median(c.p_motion),
+              Median(c.b_motion));
+  std::printf("speed      %.3f s, %.0f frames/s (open + demux + decode + MV export)\n", seconds,
+              stats.frames / std::max(seconds, 1e-9));
+}
+
 }  // namespace
 
 int RunMvs(int argc, char** argv) {
@@ -131,18 +178,12 @@ int RunMvs(int argc, char** argv) {
   auto reader = MvReader::Open(input, options);
   if (!reader.ok()) return Fail("mvs", reader.status().ToString());
 
-  std::map<PictureType, int64_t> type_count;
-  int64_t past = 0, future = 0;
-  std::vector<double> p_motion, b_motion;
+  MvCounts counts;
   bool drawn = false;
   FrameRecord f;
   Status end;
   while ((end = (*reader)->Next(&f)).ok()) {
-    ++type_count[f.type];
-    for (const MotionVector& mv : f.mvs) {
-      (mv.direction == RefDirection::kPast ? past : future)++;
-      (f.type == PictureType::kP ? p_motion : b_motion).push_back(std::hypot(mv.dx_px, mv.dy_px));
-    }
+    counts.Add(f);
     if (csv.get() != nullptr) WriteCsv(*csv.get(), f);
     if (json.get() != nullptr) WriteJsonLine(*json.get(), f);
     if (f.index == draw_frame) {
@@ -160,34 +201,7 @@ int RunMvs(int argc, char** argv) {
   const StreamInfo& info = (*reader)->info();
   const ReadStats& stats = (*reader)->stats();
   if (!quiet) {
-    std::printf("input      %s (%s, %s, %dx%d @ %.2f fps)\n", input.c_str(),
-                info.format_name.c_str(), info.codec_name.c_str(), info.width_px, info.height_px,
-                info.fps);
-    std::printf(
-        "frames     %lld (I %lld, P %lld, B %lld), n_B = %d, MV precision 1/%d px "
-        "(sigma %.3f px)%s\n",
-        static_cast<long long>(stats.frames), static_cast<long long>(type_count[PictureType::kI]),
-        static_cast<long long>(type_count[PictureType::kP]),
-        static_cast<long long>(type_count[PictureType::kB]), info.max_consecutive_b,
-        info.mv_precision_denom, info.mv_sigma_px(),
-        info.b_frame_mvs ? "" : ", B-frame MVs not exported by this decoder");
-    if (info.b_pyramid || info.extra_references()) {
-      std::printf(
-          "references %s%s%s: FFmpeg does not say which reference a vector uses; slapse "
-          "merges %s\n",
-          info.b_pyramid ? "B-pyramid (B frames are references)" : "",
-          info.b_pyramid && info.extra_references() ? ", " : "",
-          info.extra_references()
-              ? ("up to " + std::to_string(info.max_ref_frames) + " reference frames").c_str()
-              : "",
-          info.b_pyramid ? "direct vectors only" : "vectors as if they used the nearest anchor");
-    }
-    std::printf("vectors    %lld (past %lld, future %lld)\n", static_cast<long long>(past + future),
-                static_cast<long long>(past), static_cast<long long>(future));
-    std::printf("|motion|   median %.2f px in P frames, %.2f px in B frames\n", Median(p_motion),
-                Median(b_motion));
-    std::printf("speed      %.3f s, %.0f frames/s (open + demux + decode + MV export)\n", seconds,
-                stats.frames / std::max(seconds, 1e-9));
+    PrintSummary(input, info, stats, counts, seconds);
     if (drawn)
       std::printf("picture    %s (frame %lld)\n", png.c_str(),
                   static_cast<long long>(draw_frame));

@@ -23,11 +23,8 @@ StatusOr<int> ParseGopPattern(const std::string& gop) {
   return InvalidArgumentError("--gop must look like IBBBP, IBBP or IPPP, got '" + gop + "'");
 }
 
-}  // namespace
-
-int RunSimulate(int argc, char** argv) {
-  CommandLine cl("simulate", "--out DIR [options]");
-  CLI::App& app = cl.app();
+// simulate's flags, bound to a SimulateOptions (defaults: SimulateOptions{}).
+struct SimulateFlags {
   SimulateOptions opt;
   std::string codec_name = VideoCodecName(opt.encoder.codec), gop = "IBBBP";
   int64_t seed = static_cast<int64_t>(opt.seed), gop_size = opt.encoder.gop_size;
@@ -36,47 +33,50 @@ int RunSimulate(int argc, char** argv) {
   // so the defaults stay SimulateOptions{}'s exact values.
   double min_kmh = opt.min_speed_mps * 3.6, max_kmh = opt.max_speed_mps * 3.6;
   bool no_trees = false;
-  app.add_option("--out", opt.output_dir, "output directory (created)")->type_name("DIR");
-  app.add_option("--seed", seed, "scene and path seed")->type_name("N")->capture_default_str();
-  app.add_option("--codec", codec_name, "mpeg2, mpeg4 or h264")
-      ->type_name("NAME")
-      ->capture_default_str();
-  app.add_option("--gop", gop, "IBBBP (n_B = 3), IBBP, IPPP ...")
-      ->type_name("PATTERN")
-      ->capture_default_str();
-  app.add_option("--gop-size", gop_size, "frames from one I frame to the next")
-      ->type_name("N")
-      ->capture_default_str();
-  app.add_option("--quality", quality, "MPEG quantiser 1..31, or H.264 CRF 0..51")
-      ->type_name("Q")
-      ->default_str(std::to_string(quality) + " (MPEG), " + std::to_string(kH264Quality) +
-                    " (H.264)");
-  app.add_option("--duration-s", opt.duration_s, "length of the drive in seconds")
-      ->type_name("S")
-      ->capture_default_str();
-  app.add_option("--fps", opt.fps, "frame rate")->type_name("F")->capture_default_str();
-  app.add_option("--width", width, "frame width")->type_name("PX")->capture_default_str();
-  app.add_option("--height", height, "frame height")->type_name("PX")->capture_default_str();
-  app.add_option("--hfov-deg", opt.hfov_deg, "horizontal field of view")
-      ->type_name("DEG")
-      ->capture_default_str();
-  app.add_option("--min-speed-kmh", min_kmh, "slowest speed of the car")
-      ->type_name("V")
-      ->capture_default_str();
-  app.add_option("--max-speed-kmh", max_kmh, "fastest speed of the car")
-      ->type_name("V")
-      ->capture_default_str();
-  app.add_flag("--no-trees", no_trees, "leave out the non-planar clutter");
-  app.add_option("--video-name", opt.video_name,
-                 "video file name; its extension picks the container")
-      ->type_name("FILE")
-      ->capture_default_str();
-  if (int rc = cl.Parse(argc, argv); rc >= 0) return rc;
-  if (!cl.positional().empty()) {
-    return Fail("simulate", "unexpected argument '" + cl.positional()[0] + "'", 2);
-  }
-  if (!cl.Has("out")) return Fail("simulate", "--out DIR is required (see --help)", 2);
 
+  void AddTo(CLI::App& app) {
+    app.add_option("--out", opt.output_dir, "output directory (created)")->type_name("DIR");
+    app.add_option("--seed", seed, "scene and path seed")->type_name("N")->capture_default_str();
+    app.add_option("--codec", codec_name, "mpeg2, mpeg4 or h264")
+        ->type_name("NAME")
+        ->capture_default_str();
+    app.add_option("--gop", gop, "IBBBP (n_B = 3), IBBP, IPPP ...")
+        ->type_name("PATTERN")
+        ->capture_default_str();
+    app.add_option("--gop-size", gop_size, "frames from one I frame to the next")
+        ->type_name("N")
+        ->capture_default_str();
+    app.add_option("--quality", quality, "MPEG quantiser 1..31, or H.264 CRF 0..51")
+        ->type_name("Q")
+        ->default_str(std::to_string(quality) + " (MPEG), " + std::to_string(kH264Quality) +
+                      " (H.264)");
+    app.add_option("--duration-s", opt.duration_s, "length of the drive in seconds")
+        ->type_name("S")
+        ->capture_default_str();
+    app.add_option("--fps", opt.fps, "frame rate")->type_name("F")->capture_default_str();
+    app.add_option("--width", width, "frame width")->type_name("PX")->capture_default_str();
+    app.add_option("--height", height, "frame height")->type_name("PX")->capture_default_str();
+    app.add_option("--hfov-deg", opt.hfov_deg, "horizontal field of view")
+        ->type_name("DEG")
+        ->capture_default_str();
+    app.add_option("--min-speed-kmh", min_kmh, "slowest speed of the car")
+        ->type_name("V")
+        ->capture_default_str();
+    app.add_option("--max-speed-kmh", max_kmh, "fastest speed of the car")
+        ->type_name("V")
+        ->capture_default_str();
+    app.add_flag("--no-trees", no_trees, "leave out the non-planar clutter");
+    app.add_option("--video-name", opt.video_name,
+                   "video file name; its extension picks the container")
+        ->type_name("FILE")
+        ->capture_default_str();
+  }
+
+  // Range checks; fills `opt` (usage errors as INVALID_ARGUMENT).
+  Status Apply(const CommandLine& cl);
+};
+
+Status SimulateFlags::Apply(const CommandLine& cl) {
   opt.trees = !no_trees;
   auto codec = ParseVideoCodec(codec_name);
   auto b_frames = ParseGopPattern(gop);
@@ -88,14 +88,14 @@ int RunSimulate(int argc, char** argv) {
         CheckRange("height", height, int64_t{64}, int64_t{4096}),
         CheckRange("hfov-deg", opt.hfov_deg, 20, 150), CheckRange("min-speed-kmh", min_kmh, 1, 200),
         CheckRange("max-speed-kmh", max_kmh, 1, 200)}) {
-    if (!s.ok()) return Fail("simulate", s.message(), 2);
+    if (!s.ok()) return s;
   }
   if (cl.Has("min-speed-kmh")) opt.min_speed_mps = min_kmh / 3.6;
   if (cl.Has("max-speed-kmh")) opt.max_speed_mps = max_kmh / 3.6;
   if (opt.min_speed_mps > opt.max_speed_mps) {
-    return Fail("simulate", "--min-speed-kmh exceeds --max-speed-kmh", 2);
+    return InvalidArgumentError("--min-speed-kmh exceeds --max-speed-kmh");
   }
-  if (width % 2 || height % 2) return Fail("simulate", "--width and --height must be even", 2);
+  if (width % 2 || height % 2) return InvalidArgumentError("--width and --height must be even");
   opt.seed = static_cast<uint64_t>(seed);
   opt.width_px = static_cast<int>(width);
   opt.height_px = static_cast<int>(height);
@@ -103,13 +103,29 @@ int RunSimulate(int argc, char** argv) {
   opt.encoder.b_frames = *b_frames;
   opt.encoder.gop_size = static_cast<int>(gop_size);
   if (cl.Has("quality")) {
-    if (Status s = CheckRange("quality", quality, int64_t{0}, int64_t{51}); !s.ok()) {
-      return Fail("simulate", s.message(), 2);
-    }
+    SLAPSE_RETURN_IF_ERROR(CheckRange("quality", quality, int64_t{0}, int64_t{51}));
     opt.encoder.quality = static_cast<int>(quality);
   } else if (*codec == VideoCodec::kH264) {
     opt.encoder.quality = kH264Quality;
   }
+
+  return Status::Ok();
+}
+
+}  // namespace
+
+int RunSimulate(int argc, char** argv) {
+  CommandLine cl("simulate", "--out DIR [options]");
+  SimulateFlags flags;
+  flags.AddTo(cl.app());
+  if (int rc = cl.Parse(argc, argv); rc >= 0) return rc;
+  if (!cl.positional().empty()) {
+    return Fail("simulate", "unexpected argument '" + cl.positional()[0] + "'", 2);
+  }
+  if (!cl.Has("out")) return Fail("simulate", "--out DIR is required (see --help)", 2);
+  if (Status s = flags.Apply(cl); !s.ok()) return Fail("simulate", s.message(), 2);
+  const SimulateOptions& opt = flags.opt;
+  const std::string& gop = flags.gop;
 
   SimulateReport report;
   if (Status s = SimulateDrive(opt, &report); !s.ok()) return Fail("simulate", s.ToString());
