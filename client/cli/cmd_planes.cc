@@ -39,6 +39,43 @@ StatusOr<std::vector<double>> ParseList(const std::string& text, const std::stri
   return out;
 }
 
+using CsvFile = std::unique_ptr<std::FILE, int (*)(std::FILE*)>;
+
+// --planes-csv with its header, or null if it cannot be written.
+CsvFile OpenPlanesCsv(const std::string& path) {
+  CsvFile csv(std::fopen(path.c_str(), "w"), &std::fclose);
+  if (csv) {
+    std::fprintf(csv.get(),
+                 "drive,later_index,track_id,tracked,mbs,mean_mb_row,gt_plane,gt_kind,purity,"
+                 "mixed_share,transfer_px,true_positive,rms_transfer_px,track_change,"
+                 "mean_imvs,e_inlier_share,median_parallax_px,hole_share,boundary_share,"
+                 "fill_share,bbox_fill,near2,near3,back_fit,back_fit15,normal_down,"
+                 "motion_rot_err_deg,motion_dir_err_deg,vertical_err_deg,normal_true_down,"
+                 "normal_learnt_down\n");
+  }
+  return csv;
+}
+
+// The directories of the drives `drive` with these seeds under `dir`,
+// simulated unless they exist already.
+StatusOr<std::vector<std::string>> SimulatedDrives(const SimulateOptions& drive,
+                                                   const std::vector<double>& seeds,
+                                                   const std::string& dir) {
+  std::vector<std::string> dirs;
+  for (double seed : seeds) {
+    SimulateOptions opt = drive;
+    opt.seed = static_cast<uint64_t>(seed);
+    opt.output_dir = dir + "/seed" + std::to_string(opt.seed);
+    if (!std::filesystem::exists(opt.output_dir + "/meta.json")) {
+      std::fprintf(stderr, "simulating %s ...\n", opt.output_dir.c_str());
+      SimulateReport rep;
+      SLAPSE_RETURN_IF_ERROR(SimulateDrive(opt, &rep));
+    }
+    dirs.push_back(opt.output_dir);
+  }
+  return dirs;
+}
+
 }  // namespace
 
 int RunPlanes(int argc, char** argv) {
@@ -163,30 +200,13 @@ int RunEvalPlanes(int argc, char** argv) {
         CheckRange("facade-tilt-deg", eo.extraction.max_facade_tilt_deg, -1, 90)}) {
     if (!s.ok()) return Fail("eval-planes", s.message(), 2);
   }
-  std::unique_ptr<std::FILE, int (*)(std::FILE*)> csv(nullptr, &std::fclose);
+  CsvFile csv(nullptr, &std::fclose);
   if (cl.Has("planes-csv")) {
-    csv.reset(std::fopen(csv_path.c_str(), "w"));
+    csv = OpenPlanesCsv(csv_path);
     if (!csv) return Fail("eval-planes", "cannot write " + csv_path);
-    std::fprintf(csv.get(),
-                 "drive,later_index,track_id,tracked,mbs,mean_mb_row,gt_plane,gt_kind,purity,"
-                 "mixed_share,transfer_px,true_positive,rms_transfer_px,track_change,"
-                 "mean_imvs,e_inlier_share,median_parallax_px,hole_share,boundary_share,"
-                 "fill_share,bbox_fill,near2,near3,back_fit,back_fit15,normal_down,"
-                 "motion_rot_err_deg,motion_dir_err_deg,vertical_err_deg,normal_true_down,"
-                 "normal_learnt_down\n");
   }
-  std::vector<std::string> dirs;
-  for (double seed : *seeds) {
-    SimulateOptions opt = drive;
-    opt.seed = static_cast<uint64_t>(seed);
-    opt.output_dir = dir + "/seed" + std::to_string(opt.seed);
-    if (!std::filesystem::exists(opt.output_dir + "/meta.json")) {
-      std::fprintf(stderr, "simulating %s ...\n", opt.output_dir.c_str());
-      SimulateReport rep;
-      if (Status s = SimulateDrive(opt, &rep); !s.ok()) return Fail("eval-planes", s.ToString());
-    }
-    dirs.push_back(opt.output_dir);
-  }
+  auto dirs = SimulatedDrives(drive, *seeds, dir);
+  if (!dirs.ok()) return Fail("eval-planes", dirs.status().ToString());
   std::printf(
       "| eps_h (px) | anchor pairs | planes extracted | TP rate | recall (all visible) | "
       "recall (road + facades) | recall (>= 20 kept MBs) |\n"
@@ -196,7 +216,7 @@ int RunEvalPlanes(int argc, char** argv) {
     eo.extraction.eps_h_px = eps;
     eo.planes_csv = csv.get();
     ExtractionStats total;
-    for (const std::string& drive_dir : dirs) {
+    for (const std::string& drive_dir : *dirs) {
       auto stats = EvaluateExtraction(drive_dir, eo);
       if (!stats.ok()) return Fail("eval-planes", drive_dir + ": " + stats.status().ToString());
       total.Add(*stats);
