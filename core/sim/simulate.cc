@@ -15,6 +15,43 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
+// The full meta.json (a superset of what SaveGroundTruth wrote).
+Status WriteMeta(const SimulateOptions& o, const EncoderOptions& eo, const Drive& drive,
+                 const GroundTruth& gt, const SimulateReport& report) {
+  Json meta;
+  meta["seed"] = o.seed;
+  meta["video"] = o.video_name;
+  meta["codec"] = VideoCodecName(eo.codec);
+  meta["b_frames"] = eo.b_frames;
+  meta["gop_size"] = eo.gop_size;
+  meta["quality"] = eo.quality;
+  meta["mpeg4_qpel"] = eo.mpeg4_qpel;
+  meta["fps"] = o.fps;
+  meta["frames"] = gt.frames.size();
+  meta["width_px"] = o.width_px;
+  meta["height_px"] = o.height_px;
+  meta["hfov_deg"] = o.hfov_deg;
+  meta["mb_cols"] = gt.mb_cols;
+  meta["mb_rows"] = gt.mb_rows;
+  meta["duration_s"] = o.duration_s;
+  meta["min_speed_mps"] = o.min_speed_mps;
+  meta["max_speed_mps"] = o.max_speed_mps;
+  meta["trees"] = o.trees;
+  meta["supersampling"] = o.supersampling;
+  meta["camera_height_m"] = drive.path.camera_height_m;
+  meta["pitch_down_deg"] = drive.path.pitch_down_deg;
+  meta["distance_m"] = drive.path.distance_m;
+  meta["num_planes"] = drive.scene.planes.size();
+  meta["render_s"] = report.render_s;
+  meta["encode_s"] = report.encode_s;
+  const auto meta_path = std::filesystem::path(o.output_dir) / "meta.json";
+  std::ofstream out(meta_path, std::ios::trunc);
+  out << DumpJson(meta, ExactNumber);
+  out.close();
+  if (!out) return DataLossError("failed writing " + meta_path.string());
+  return Status::Ok();
+}
+
 }  // namespace
 
 Status SimulateDrive(const SimulateOptions& o, SimulateReport* report) {
@@ -78,39 +115,7 @@ Status SimulateDrive(const SimulateOptions& o, SimulateReport* report) {
   report->num_planes = static_cast<int>(drive.scene.planes.size());
   report->video_path = video_path;
 
-  // The full meta.json (a superset of what SaveGroundTruth wrote).
-  Json meta;
-  meta["seed"] = o.seed;
-  meta["video"] = o.video_name;
-  meta["codec"] = VideoCodecName(eo.codec);
-  meta["b_frames"] = eo.b_frames;
-  meta["gop_size"] = eo.gop_size;
-  meta["quality"] = eo.quality;
-  meta["mpeg4_qpel"] = eo.mpeg4_qpel;
-  meta["fps"] = o.fps;
-  meta["frames"] = n;
-  meta["width_px"] = o.width_px;
-  meta["height_px"] = o.height_px;
-  meta["hfov_deg"] = o.hfov_deg;
-  meta["mb_cols"] = gt.mb_cols;
-  meta["mb_rows"] = gt.mb_rows;
-  meta["duration_s"] = o.duration_s;
-  meta["min_speed_mps"] = o.min_speed_mps;
-  meta["max_speed_mps"] = o.max_speed_mps;
-  meta["trees"] = o.trees;
-  meta["supersampling"] = o.supersampling;
-  meta["camera_height_m"] = drive.path.camera_height_m;
-  meta["pitch_down_deg"] = drive.path.pitch_down_deg;
-  meta["distance_m"] = drive.path.distance_m;
-  meta["num_planes"] = drive.scene.planes.size();
-  meta["render_s"] = report->render_s;
-  meta["encode_s"] = report->encode_s;
-  const auto meta_path = std::filesystem::path(o.output_dir) / "meta.json";
-  std::ofstream out(meta_path, std::ios::trunc);
-  out << DumpJson(meta, ExactNumber);
-  out.close();
-  if (!out) return DataLossError("failed writing " + meta_path.string());
-  return Status::Ok();
+  return WriteMeta(o, eo, drive, gt, *report);
 }
 
 }  // namespace slapse
