@@ -281,6 +281,80 @@ Status LoadMixedShares(const std::filesystem::path& root, GroundTruth* out) {
   return Status::Ok();
 }
 
+// trajectory_tum.txt
+std::string TrajectoryText(const GroundTruth& gt) {
+  std::ostringstream traj;
+  traj << "# timestamp_s tx ty tz qx qy qz qw  (world_from_cam; world z up, road plane z = 0)\n";
+  for (const GtFrame& f : gt.frames) {
+    const Eigen::Vector3d& t = f.world_from_cam.translation;
+    const Eigen::Quaterniond& q = f.world_from_cam.rotation;
+    traj << Num(f.timestamp_s) << ' ' << Num(t.x()) << ' ' << Num(t.y()) << ' ' << Num(t.z()) << ' '
+         << Num(q.x()) << ' ' << Num(q.y()) << ' ' << Num(q.z()) << ' ' << Num(q.w()) << '\n';
+  }
+  return traj.str();
+}
+
+// intrinsics.json
+std::string IntrinsicsJsonText(const Intrinsics& k) {
+  Json intr;
+  intr["fx_px"] = k.fx_px;
+  intr["fy_px"] = k.fy_px;
+  intr["cx_px"] = k.cx_px;
+  intr["cy_px"] = k.cy_px;
+  intr["width_px"] = k.width_px;
+  intr["height_px"] = k.height_px;
+  return DumpJson(intr, ExactNumber);
+}
+
+// planes.json
+std::string PlanesJsonText(const std::vector<GtPlane>& gt_planes) {
+  Json planes;
+  Json& list = planes["planes"] = Json::array();
+  for (const GtPlane& p : gt_planes) {
+    Json plane;
+    plane["id"] = p.id;
+    plane["kind"] = PlaneKindName(p.kind);
+    plane["normal_world"] = Vec(p.normal_world);
+    plane["distance_m"] = p.distance_m;
+    Json& polygons = plane["polygons"] = Json::array();
+    for (const auto& poly : p.polygons_world) {
+      Json vertices = Json::array();
+      for (const Eigen::Vector3d& v : poly) vertices.push_back(Vec(v));
+      polygons.push_back(std::move(vertices));
+    }
+    list.push_back(std::move(plane));
+  }
+  return DumpJson(planes, ExactNumber);
+}
+
+// mb_labels.txt
+std::string MbLabelsText(const GroundTruth& gt) {
+  std::ostringstream mb;
+  mb << "# frame_index mb_cols mb_rows labels... (row-major; plane id >= 0, " << kMbSky << " sky, "
+     << kMbClutter << " clutter, " << kMbMixed << " mixed)\n";
+  for (size_t i = 0; i < gt.frames.size(); ++i) {
+    mb << i << ' ' << gt.mb_cols << ' ' << gt.mb_rows;
+    for (int l : gt.frames[i].mb_labels) mb << ' ' << l;
+    mb << '\n';
+  }
+  return mb.str();
+}
+
+// mb_mixed.txt
+std::string MbMixedText(const GroundTruth& gt) {
+  std::ostringstream mixed;
+  mixed << "# frame_index mb_index label:share... (the blocks labelled " << kMbMixed
+        << " in mb_labels.txt: what their pixels see, largest share first)\n";
+  for (size_t i = 0; i < gt.frames.size(); ++i) {
+    for (const auto& [mb_index, shares] : gt.frames[i].mixed_shares) {
+      mixed << i << ' ' << mb_index;
+      for (const MbShare& s : shares) mixed << ' ' << s.label << ':' << s.share;
+      mixed << '\n';
+    }
+  }
+  return mixed.str();
+}
+
 }  // namespace
 
 Status SaveGroundTruth(const GroundTruth& gt, const std::string& dir) {
@@ -300,65 +374,11 @@ Status SaveGroundTruth(const GroundTruth& gt, const std::string& dir) {
   if (ec) return UnavailableError("cannot create " + dir + ": " + ec.message());
   const std::filesystem::path root(dir);
 
-  std::ostringstream traj;
-  traj << "# timestamp_s tx ty tz qx qy qz qw  (world_from_cam; world z up, road plane z = 0)\n";
-  for (const GtFrame& f : gt.frames) {
-    const Eigen::Vector3d& t = f.world_from_cam.translation;
-    const Eigen::Quaterniond& q = f.world_from_cam.rotation;
-    traj << Num(f.timestamp_s) << ' ' << Num(t.x()) << ' ' << Num(t.y()) << ' ' << Num(t.z()) << ' '
-         << Num(q.x()) << ' ' << Num(q.y()) << ' ' << Num(q.z()) << ' ' << Num(q.w()) << '\n';
-  }
-  SLAPSE_RETURN_IF_ERROR(WriteFile(root / "trajectory_tum.txt", traj.str()));
-
-  const Intrinsics& k = gt.intrinsics;
-  Json intr;
-  intr["fx_px"] = k.fx_px;
-  intr["fy_px"] = k.fy_px;
-  intr["cx_px"] = k.cx_px;
-  intr["cy_px"] = k.cy_px;
-  intr["width_px"] = k.width_px;
-  intr["height_px"] = k.height_px;
-  SLAPSE_RETURN_IF_ERROR(WriteFile(root / "intrinsics.json", DumpJson(intr, ExactNumber)));
-
-  Json planes;
-  Json& list = planes["planes"] = Json::array();
-  for (const GtPlane& p : gt.planes) {
-    Json plane;
-    plane["id"] = p.id;
-    plane["kind"] = PlaneKindName(p.kind);
-    plane["normal_world"] = Vec(p.normal_world);
-    plane["distance_m"] = p.distance_m;
-    Json& polygons = plane["polygons"] = Json::array();
-    for (const auto& poly : p.polygons_world) {
-      Json vertices = Json::array();
-      for (const Eigen::Vector3d& v : poly) vertices.push_back(Vec(v));
-      polygons.push_back(std::move(vertices));
-    }
-    list.push_back(std::move(plane));
-  }
-  SLAPSE_RETURN_IF_ERROR(WriteFile(root / "planes.json", DumpJson(planes, ExactNumber)));
-
-  std::ostringstream mb;
-  mb << "# frame_index mb_cols mb_rows labels... (row-major; plane id >= 0, " << kMbSky << " sky, "
-     << kMbClutter << " clutter, " << kMbMixed << " mixed)\n";
-  for (size_t i = 0; i < gt.frames.size(); ++i) {
-    mb << i << ' ' << gt.mb_cols << ' ' << gt.mb_rows;
-    for (int l : gt.frames[i].mb_labels) mb << ' ' << l;
-    mb << '\n';
-  }
-  SLAPSE_RETURN_IF_ERROR(WriteFile(root / "mb_labels.txt", mb.str()));
-
-  std::ostringstream mixed;
-  mixed << "# frame_index mb_index label:share... (the blocks labelled " << kMbMixed
-        << " in mb_labels.txt: what their pixels see, largest share first)\n";
-  for (size_t i = 0; i < gt.frames.size(); ++i) {
-    for (const auto& [mb_index, shares] : gt.frames[i].mixed_shares) {
-      mixed << i << ' ' << mb_index;
-      for (const MbShare& s : shares) mixed << ' ' << s.label << ':' << s.share;
-      mixed << '\n';
-    }
-  }
-  SLAPSE_RETURN_IF_ERROR(WriteFile(root / "mb_mixed.txt", mixed.str()));
+  SLAPSE_RETURN_IF_ERROR(WriteFile(root / "trajectory_tum.txt", TrajectoryText(gt)));
+  SLAPSE_RETURN_IF_ERROR(WriteFile(root / "intrinsics.json", IntrinsicsJsonText(gt.intrinsics)));
+  SLAPSE_RETURN_IF_ERROR(WriteFile(root / "planes.json", PlanesJsonText(gt.planes)));
+  SLAPSE_RETURN_IF_ERROR(WriteFile(root / "mb_labels.txt", MbLabelsText(gt)));
+  SLAPSE_RETURN_IF_ERROR(WriteFile(root / "mb_mixed.txt", MbMixedText(gt)));
 
   // Minimal meta.json; SimulateDrive replaces it with a superset.
   Json meta;
