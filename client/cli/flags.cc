@@ -16,6 +16,8 @@ CommandLine::CommandLine(const std::string& command, const std::string& synopsis
   app_.add_option(positional_name, positional_, "")->group("");  // the synopsis shows them
   // Unknown options are collected and reported by Parse, before --help.
   app_.allow_extras();
+  // A switch takes no value: --quiet=1 is a usage error, as it always was.
+  app_.option_defaults()->disable_flag_override();
 }
 
 namespace {
