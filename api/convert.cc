@@ -119,7 +119,7 @@ PipelineOptions PipelineOptionsFromProto(const v1::PipelineOptions& p) {
   return o;
 }
 
-v1::Trajectory::Point TrajectoryPointToProto(const TimedPose& point) {
+v1::Trajectory::Point TimedPoseToProto(const TimedPose& point) {
   v1::Trajectory::Point out;
   out.set_anchor_index(point.index);
   out.set_timestamp_s(point.timestamp_s);
@@ -135,17 +135,10 @@ TimedPose TimedPoseFromProto(const v1::Trajectory::Point& point) {
   return out;
 }
 
-std::vector<TrajectoryPoint> TrajectoryFromProto(const v1::Trajectory& trajectory) {
-  std::vector<TrajectoryPoint> out;
+std::vector<TimedPose> TrajectoryFromProto(const v1::Trajectory& trajectory) {
+  std::vector<TimedPose> out;
   out.reserve(trajectory.points_size());
-  for (const v1::Trajectory::Point& p : trajectory.points()) {
-    const TimedPose pose = TimedPoseFromProto(p);
-    TrajectoryPoint point{};
-    point.index = pose.index;
-    point.timestamp_s = pose.timestamp_s;
-    point.world_from_cam = pose.world_from_cam;
-    out.push_back(point);
-  }
+  for (const v1::Trajectory::Point& p : trajectory.points()) out.push_back(TimedPoseFromProto(p));
   return out;
 }
 

@@ -11,8 +11,6 @@
 #pragma once
 
 #include <map>
-#include <type_traits>
-#include <utility>
 #include <vector>
 
 #include "core/common/camera.h"
@@ -22,11 +20,6 @@
 #include "slapse/v1/slapse.pb.h"
 
 namespace slapse::api {
-
-// The element type of Pipeline::trajectory() (and so of the trajectory
-// writers in core/pipeline/result_io.h).
-using TrajectoryPoint =
-    std::decay_t<decltype(std::declval<const Pipeline&>().trajectory())>::value_type;
 
 // Camera (width_px / height_px 0: the stream's).
 v1::Intrinsics IntrinsicsToProto(const Intrinsics& k);
@@ -46,9 +39,9 @@ ScaleOptions::Source ScaleSourceFromProto(v1::PipelineOptions::ScaleSource sourc
 
 // Trajectory: one point, and a GetTrajectory snapshot as
 // Pipeline::trajectory() holds it.
-v1::Trajectory::Point TrajectoryPointToProto(const TimedPose& point);
+v1::Trajectory::Point TimedPoseToProto(const TimedPose& point);
 TimedPose TimedPoseFromProto(const v1::Trajectory::Point& point);
-std::vector<TrajectoryPoint> TrajectoryFromProto(const v1::Trajectory& trajectory);
+std::vector<TimedPose> TrajectoryFromProto(const v1::Trajectory& trajectory);
 
 // Plane map: one plane, and a GetPlaneMap snapshot by track id. The wire
 // carries neither seen_indices, pi_cam, mb_indices nor support_world (nor the

@@ -16,6 +16,8 @@ PACKAGES=(
   libavformat-dev libavcodec-dev libavutil-dev libswscale-dev ffmpeg
   # maths and vision
   libeigen3-dev libopencv-dev
+  # parsing: CLI flags (CLI11) and JSON files (nlohmann-json), header-only
+  libcli11-dev nlohmann-json3-dev
   # service
   libgrpc++-dev libprotobuf-dev protobuf-compiler protobuf-compiler-grpc
   # tests

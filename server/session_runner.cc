@@ -213,7 +213,7 @@ void SessionRunner::ApplyUpdatesLocked(const StepUpdates& u,
     s.planes.clear();
     for (const auto& [id, mp] : *u.plane_map) s.planes[id] = api::MapPlaneToProto(mp);
   }
-  for (const TimedPose& p : u.new_points) s.trajectory.push_back(api::TrajectoryPointToProto(p));
+  for (const TimedPose& p : u.new_points) s.trajectory.push_back(api::TimedPoseToProto(p));
 
   v1::SessionEvent pose;
   v1::PoseUpdate* pu = pose.mutable_pose();

@@ -142,13 +142,13 @@ TEST(ConvertTest, PoseAndTrajectoryRoundTrip) {
   p.index = 42;
   p.timestamp_s = 1.68;
   p.world_from_cam = SomePose();
-  const v1::Trajectory::Point proto = api::TrajectoryPointToProto(p);
+  const v1::Trajectory::Point proto = api::TimedPoseToProto(p);
   const TimedPose back = api::TimedPoseFromProto(proto);
   EXPECT_EQ(back.index, 42);
   EXPECT_EQ(back.timestamp_s, 1.68);
   EXPECT_EQ(back.world_from_cam.translation, p.world_from_cam.translation);
   EXPECT_EQ(back.world_from_cam.rotation.coeffs(), p.world_from_cam.rotation.coeffs());
-  EXPECT_TRUE(MessageDifferencer::Equals(api::TrajectoryPointToProto(back), proto));
+  EXPECT_TRUE(MessageDifferencer::Equals(api::TimedPoseToProto(back), proto));
 
   v1::Trajectory t;
   *t.add_points() = proto;

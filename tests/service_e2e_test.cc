@@ -30,7 +30,7 @@ using server::SlapseServer;
 // What `slapse run` computes for a file, with a session's default options.
 struct OfflineResult {
   int64_t frames = 0;
-  std::vector<api::TrajectoryPoint> trajectory;
+  std::vector<TimedPose> trajectory;
   std::map<int, MapPlane> planes;
   bool metric = false;
 };
@@ -117,7 +117,7 @@ void ExpectSameResults(const OfflineResult& offline, const ServedResult& served)
   EXPECT_EQ(served.trajectory.metric(), offline.metric);
   ASSERT_EQ(served.trajectory.points_size(), static_cast<int>(offline.trajectory.size()));
   for (size_t i = 0; i < offline.trajectory.size(); ++i) {
-    const api::TrajectoryPoint& o = offline.trajectory[i];
+    const TimedPose& o = offline.trajectory[i];
     const v1::Trajectory::Point& s = served.trajectory.points(static_cast<int>(i));
     const v1::Pose& p = s.world_from_cam();
     SCOPED_TRACE("pose " + std::to_string(i));

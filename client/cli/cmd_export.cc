@@ -10,6 +10,7 @@
 #include "client/lib/client.h"
 #include "api/convert.h"
 #include "core/pipeline/result_io.h"
+#include "server/server.h"
 
 namespace slapse::cli {
 namespace {
@@ -24,39 +25,40 @@ const char* DefaultFileName(const std::string& format) {
 }  // namespace
 
 int RunExport(int argc, char** argv) {
-  Flags flags(
-      "export",
-      "SESSION [options]   (the session's trajectory / plane map so far, as slapse run writes "
-      "them)",
-      {{"server", "HOST:PORT", "the slapse server", "localhost:50051"},
-       {"format", "FMT",
-        "tum or kitti (trajectory, as run's trajectory_*.txt), json (trajectory + planes, "
-        "run's planes.json schema)",
-        "json"},
-       {"out", "PATH",
-        "file to write, '-' for stdout, or a directory (gets trajectory_tum.txt, "
-        "trajectory_kitti.txt or session.json)",
-        "-"}});
-  if (Status s = flags.Parse(argc, argv); !s.ok()) return Fail("export", s.message(), 2);
-  if (flags.help_requested()) {
-    std::printf("%s", flags.Usage().c_str());
-    return 0;
-  }
-  if (flags.positional().size() != 1) {
+  CommandLine cl("export",
+                 "SESSION [options]   (the session's trajectory / plane map so far, as slapse run "
+                 "writes them)",
+                 "SESSION");
+  CLI::App& app = cl.app();
+  std::string server = "localhost:" + std::to_string(server::ServerOptions{}.port);
+  std::string format = "json", out = "-";
+  app.add_option("--server", server, "the slapse server")
+      ->type_name("HOST:PORT")
+      ->capture_default_str();
+  app.add_option("--format", format,
+                 "tum or kitti (trajectory, as run's trajectory_*.txt), json (trajectory + planes, "
+                 "run's planes.json schema)")
+      ->type_name("FMT")
+      ->capture_default_str();
+  app.add_option("--out", out,
+                 "file to write, '-' for stdout, or a directory (gets trajectory_tum.txt, "
+                 "trajectory_kitti.txt or session.json)")
+      ->type_name("PATH")
+      ->capture_default_str();
+  if (int rc = cl.Parse(argc, argv); rc >= 0) return rc;
+  if (cl.positional().size() != 1) {
     return Fail("export", "expected one SESSION, e.g. sessions/1 (see --help)", 2);
   }
-  const std::string format = flags.GetString("format");
   if (format != "tum" && format != "kitti" && format != "json") {
     return Fail("export", "--format must be tum, kitti or json, not '" + format + "'", 2);
   }
-  std::string out = flags.GetString("out");
   std::error_code ec;
   if (out != "-" && std::filesystem::is_directory(out, ec)) {
     out = (std::filesystem::path(out) / DefaultFileName(format)).string();
   }
 
-  const std::string name = flags.positional()[0];
-  auto client = client::SlapseClient::Connect(flags.GetString("server"));
+  const std::string name = cl.positional()[0];
+  auto client = client::SlapseClient::Connect(server);
   auto session = client->GetSession(name);
   if (!session.ok()) return Fail("export", session.status().ToString());
   auto trajectory = client->GetTrajectory(name);

@@ -35,86 +35,171 @@ Status WriteResults(const Pipeline& pipeline, const std::string& dir) {
   });
 }
 
+using CsvFile = std::unique_ptr<std::FILE, int (*)(std::FILE*)>;
+
+// --steps-csv with its header, or null if it cannot be written.
+CsvFile OpenStepsCsv(const std::string& path) {
+  CsvFile csv(std::fopen(path.c_str(), "w"), &std::fclose);
+  if (csv) {
+    std::fprintf(
+        csv.get(),
+        "later_index,tracking,step_length,kept,filter_planes,updated,added,removed,rejected,"
+        "reassociated,reidentified,road_coasting,rms_residual_px,extracted,note\n");
+  }
+  return csv;
+}
+
+// One --steps-csv row for an anchor pair.
+void WriteStepRow(std::FILE* csv, const PipelineStep& s,
+                  const std::vector<TimedPose>& traj) {
+  // extracted: track_id:MBs:t(racked)/n(ew):track_change, space separated.
+  std::string extracted;
+  for (const ExtractedPlane& ex : s.extracted) {
+    char buf[64];
+    std::snprintf(buf, sizeof(buf), "%s%d:%zu:%c:%.2f", extracted.empty() ? "" : " ", ex.track_id,
+                  ex.mb_indices.size(), ex.tracked ? 't' : 'n', ex.track_change);
+    extracted += buf;
+  }
+  const double length = traj.size() >= 2 ? (traj.back().world_from_cam.translation -
+                                            traj[traj.size() - 2].world_from_cam.translation)
+                                               .norm()
+                                         : 0.0;
+  std::fprintf(csv, "%lld,%d,%.4f,%d,%zu,%d,%d,%d,%d,%d,%d,%d,%.3f,%s,\"%s\"\n",
+               static_cast<long long>(s.later_index), s.tracking ? 1 : 0, length, s.kept,
+               s.planes.size(), s.ekf.planes_updated, s.ekf.planes_added, s.ekf.planes_removed,
+               s.ekf.planes_rejected, s.ekf.planes_reassociated, s.ekf.planes_reidentified,
+               s.ekf.road_coasting ? 1 : 0, s.ekf.rms_residual_px, extracted.c_str(),
+               s.note.c_str());
+}
+
+// The truth in the top-down plot: its path and the facades' footprints on the road.
+void DrawTruth(const GroundTruth& gt, const std::vector<TimedPose>& truth, TopDownPlot* plot) {
+  std::vector<Eigen::Vector2d> gt_path;
+  for (const TimedPose& t : truth) gt_path.push_back(t.world_from_cam.translation.head<2>());
+  plot->AddPath(gt_path, cv::Scalar(60, 60, 60), "ground truth", 2);
+  for (const GtPlane& p : gt.planes) {
+    if (p.kind != PlaneKind::kFacade) continue;
+    for (const auto& poly : p.polygons_world) {
+      for (size_t i = 0; i + 1 < poly.size(); ++i) {
+        if (std::abs(poly[i].z()) < 1e-6 && std::abs(poly[i + 1].z()) < 1e-6) {
+          plot->AddSegment(poly[i].head<2>(), poly[i + 1].head<2>(), cv::Scalar(190, 190, 190), 3);
+        }
+      }
+    }
+  }
+}
+
+void PrintErrors(const TrajectoryErrors& terr, const StatusOr<PlaneMapErrors>& perr) {
+  std::printf("distance   %.1f m over %d poses\n", terr.distance_m, terr.poses);
+  std::printf("eps_D      %.2f %%   (paper: mean relative position error, first-step scale)\n",
+              100 * terr.eps_D);
+  std::printf("ATE        %.3f m   (RMSE after Sim(3) alignment, scale %.3f m/unit)\n",
+              terr.ate_rmse_m, terr.sim3_scale);
+  std::printf("RPE        %.3f m, %.3f deg per anchor step (RMSE)\n", terr.rpe_trans_rmse_m,
+              terr.rpe_rot_rmse_deg);
+  if (perr.ok()) {
+    std::printf("planes     %d evaluated (seen >= 0.5 s): eps_d %.2f m, eps_n %.2f deg\n",
+                perr->planes_evaluated, perr->eps_d_m, perr->eps_n_deg);
+  }
+}
+
+// map.png (the estimate in x-z of its world, the first camera, or aligned to
+// the truth) and, with the truth, the errors on stdout.
+void MapAndErrors(const Pipeline& pipeline, const std::optional<GroundTruth>& gt,
+                  const std::vector<PlaneEstimate>& plane_estimates, const std::string& out_dir) {
+  TopDownPlot plot;
+  const Sim3d* align = nullptr;
+  std::optional<TrajectoryErrors> terr;
+  if (gt.has_value()) {
+    std::vector<TimedPose> est;
+    for (const auto& p : pipeline.trajectory())
+      est.push_back({p.index, p.timestamp_s, p.world_from_cam});
+    const std::vector<TimedPose> truth = TruthPoses(*gt);
+    auto e = EvaluateTrajectory(est, truth);
+    if (e.ok()) {
+      terr = *e;
+      align = &terr->truth_from_estimate;
+      DrawTruth(*gt, truth, &plot);
+    } else {
+      std::printf("errors     not available: %s\n", e.status().ToString().c_str());
+    }
+  }
+  auto to_map = [&](const Eigen::Vector3d& x) -> Eigen::Vector2d {
+    if (align != nullptr) return ((*align) * x).head<2>();
+    return Eigen::Vector2d(x.x(), x.z());  // camera world: x right, z forward
+  };
+  std::vector<Eigen::Vector2d> est_path;
+  for (const auto& p : pipeline.trajectory())
+    est_path.push_back(to_map(p.world_from_cam.translation));
+  for (const auto& [id, mp] : pipeline.plane_map()) {
+    std::vector<Eigen::Vector2d> pts;
+    for (const Eigen::Vector3d& x : mp.support_world) pts.push_back(to_map(x));
+    plot.AddPoints(std::move(pts), TrackColour(id), 1);
+  }
+  plot.AddPath(est_path, cv::Scalar(30, 30, 220), align ? "SLAPSE (Sim(3)-aligned)" : "SLAPSE", 2);
+  const std::string unit = align != nullptr || pipeline.metric() ? "m" : "first steps";
+  cv::imwrite(out_dir + "/map.png", plot.Render(900, 900, "trajectory and plane map", unit));
+  if (terr.has_value()) {
+    PrintErrors(*terr, EvaluatePlaneMap(plane_estimates, *gt, terr->first_step_scale));
+  }
+}
+
 }  // namespace
 
 int RunRun(int argc, char** argv) {
-  Flags flags(
-      "run", "INPUT [options]   (INPUT: a file path or URL)",
-      {{"intrinsics", "SPEC",
-        "FILE.json, 'fx,fy,cx,cy' or 'hfov=DEG' (default: intrinsics.json beside INPUT)", ""},
-       {"out", "DIR", "output directory", "out/run"},
-       {"gt", "DIR", "a simulated drive's directory: print errors, draw the truth", ""},
-       {"first-step-m", "M", "metric scale: length of the first tracked step", ""},
-       {"speed-kmh", "V", "metric scale: speed at the start", ""},
-       {"camera-height-m", "H", "metric scale: camera height above the road plane", ""},
-       {"eps-h", "PX", "homography inlier threshold", "1"},
-       {"steps-csv", "FILE", "also write one CSV row per anchor pair: its planes and the filter's",
-        ""},
-       {"quiet", "", "no progress line", ""}});
-  if (Status s = flags.Parse(argc, argv); !s.ok()) return Fail("run", s.message(), 2);
-  if (flags.help_requested()) {
-    std::printf("%s", flags.Usage().c_str());
-    return 0;
-  }
-  if (flags.positional().size() != 1) return Fail("run", "expected one INPUT (see --help)", 2);
-  const std::string input = flags.positional()[0];
+  CommandLine cl("run", "INPUT [options]   (INPUT: a file path or URL)", "INPUT");
+  CLI::App& app = cl.app();
   PipelineOptions po;
-  auto eps = flags.GetDouble("eps-h", 0.05, 100);
-  if (!eps.ok()) return Fail("run", eps.status().message(), 2);
-  po.extraction.eps_h_px = *eps;
-  int scale_sources = 0;
-  if (flags.Has("first-step-m")) {
-    auto v = flags.GetDouble("first-step-m", 1e-3, 1e3);
-    if (!v.ok()) return Fail("run", v.status().message(), 2);
-    po.scale.source = ScaleOptions::Source::kFirstStep;
-    po.scale.first_step_m = *v;
-    ++scale_sources;
+  std::string intrinsics_spec, gt_dir, steps_csv_path, out_dir = "out/run";
+  app.add_option("--intrinsics", intrinsics_spec,
+                 "FILE.json, 'fx,fy,cx,cy' or 'hfov=DEG' (default: intrinsics.json beside INPUT)")
+      ->type_name("SPEC");
+  app.add_option("--out", out_dir, "output directory")->type_name("DIR")->capture_default_str();
+  app.add_option("--gt", gt_dir, "a simulated drive's directory: print errors, draw the truth")
+      ->type_name("DIR");
+  ScaleFlags scale_flags;
+  scale_flags.AddTo(&cl);
+  app.add_option("--eps-h", po.extraction.eps_h_px, "homography inlier threshold")
+      ->type_name("PX")
+      ->capture_default_str();
+  app.add_option("--steps-csv", steps_csv_path,
+                 "also write one CSV row per anchor pair: its planes and the filter's")
+      ->type_name("FILE");
+  bool quiet = false;
+  app.add_flag("--quiet", quiet, "no progress line");
+  if (int rc = cl.Parse(argc, argv); rc >= 0) return rc;
+  if (cl.positional().size() != 1) return Fail("run", "expected one INPUT (see --help)", 2);
+  const std::string input = cl.positional()[0];
+  if (Status s = CheckRange("eps-h", po.extraction.eps_h_px, 0.05, 100); !s.ok()) {
+    return Fail("run", s.message(), 2);
   }
-  if (flags.Has("speed-kmh")) {
-    auto v = flags.GetDouble("speed-kmh", 0.1, 500);
-    if (!v.ok()) return Fail("run", v.status().message(), 2);
-    po.scale.source = ScaleOptions::Source::kSpeed;
-    po.scale.speed_mps = *v / 3.6;
-    ++scale_sources;
-  }
-  if (flags.Has("camera-height-m")) {
-    auto v = flags.GetDouble("camera-height-m", 0.05, 100);
-    if (!v.ok()) return Fail("run", v.status().message(), 2);
-    po.scale.source = ScaleOptions::Source::kCameraHeight;
-    po.scale.camera_height_m = *v;
-    ++scale_sources;
-  }
-  if (scale_sources > 1) return Fail("run", "give at most one scale source", 2);
+  auto scale = scale_flags.Options();
+  if (!scale.ok()) return Fail("run", scale.status().message(), 2);
+  po.scale = *scale;
 
   std::optional<GroundTruth> gt;
-  if (flags.Has("gt")) {
-    auto loaded = LoadGroundTruth(flags.GetString("gt"));
+  if (cl.Has("gt")) {
+    auto loaded = LoadGroundTruth(gt_dir);
     if (!loaded.ok()) return Fail("run", "--gt: " + loaded.status().ToString(), 2);
     gt = std::move(*loaded);
   }
   auto reader = MvReader::Open(input);
   if (!reader.ok()) return Fail("run", reader.status().ToString());
   const StreamInfo& info = (*reader)->info();
-  auto intrinsics =
-      IntrinsicsFor(flags.GetString("intrinsics"), input, info.width_px, info.height_px);
+  auto intrinsics = IntrinsicsFor(intrinsics_spec, input, info.width_px, info.height_px);
   if (!intrinsics.ok()) return Fail("run", intrinsics.status().message(), 2);
-  const std::string out_dir = flags.GetString("out");
   std::error_code ec;
   std::filesystem::create_directories(out_dir, ec);
   if (ec) return Fail("run", "cannot create " + out_dir + ": " + ec.message());
 
-  std::unique_ptr<std::FILE, int (*)(std::FILE*)> steps_csv(nullptr, &std::fclose);
-  if (flags.Has("steps-csv")) {
-    steps_csv.reset(std::fopen(flags.GetString("steps-csv").c_str(), "w"));
-    if (!steps_csv) return Fail("run", "cannot write " + flags.GetString("steps-csv"));
-    std::fprintf(
-        steps_csv.get(),
-        "later_index,tracking,step_length,kept,filter_planes,updated,added,removed,rejected,"
-        "reassociated,reidentified,road_coasting,rms_residual_px,extracted,note\n");
+  CsvFile steps_csv(nullptr, &std::fclose);
+  if (cl.Has("steps-csv")) {
+    steps_csv = OpenStepsCsv(steps_csv_path);
+    if (!steps_csv) return Fail("run", "cannot write " + steps_csv_path);
   }
   Pipeline pipeline(*intrinsics, info.mv_sigma_px(), po);
   std::vector<PlaneEstimate> plane_estimates;
-  const bool progress = !flags.GetBool("quiet") && isatty(STDERR_FILENO);
+  const bool progress = !quiet && isatty(STDERR_FILENO);
   int steps = 0, tracked = 0;
   FrameRecord frame;
   Status end;
@@ -130,27 +215,7 @@ int RunRun(int argc, char** argv) {
     const PipelineStep& s = **step;
     ++steps;
     tracked += s.tracking;
-    if (steps_csv) {
-      // extracted: track_id:MBs:t(racked)/n(ew):track_change, space separated.
-      std::string extracted;
-      for (const ExtractedPlane& ex : s.extracted) {
-        char buf[64];
-        std::snprintf(buf, sizeof(buf), "%s%d:%zu:%c:%.2f", extracted.empty() ? "" : " ",
-                      ex.track_id, ex.mb_indices.size(), ex.tracked ? 't' : 'n', ex.track_change);
-        extracted += buf;
-      }
-      const auto& traj = pipeline.trajectory();
-      const double length = traj.size() >= 2 ? (traj.back().world_from_cam.translation -
-                                                traj[traj.size() - 2].world_from_cam.translation)
-                                                   .norm()
-                                             : 0.0;
-      std::fprintf(steps_csv.get(), "%lld,%d,%.4f,%d,%zu,%d,%d,%d,%d,%d,%d,%d,%.3f,%s,\"%s\"\n",
-                   static_cast<long long>(s.later_index), s.tracking ? 1 : 0, length, s.kept,
-                   s.planes.size(), s.ekf.planes_updated, s.ekf.planes_added, s.ekf.planes_removed,
-                   s.ekf.planes_rejected, s.ekf.planes_reassociated, s.ekf.planes_reidentified,
-                   s.ekf.road_coasting ? 1 : 0, s.ekf.rms_residual_px, extracted.c_str(),
-                   s.note.c_str());
-    }
+    if (steps_csv) WriteStepRow(steps_csv.get(), s, pipeline.trajectory());
     AppendPlaneEstimates(s.later_index, s.planes, s.extracted, s.extracted_filter_ids,
                          &plane_estimates);
   }
@@ -166,67 +231,7 @@ int RunRun(int argc, char** argv) {
               steps, pipeline.trajectory().size(), pipeline.plane_map().size(),
               pipeline.metric() ? "metres" : "up to scale: first step = 1");
 
-  // Top-down plot: estimate in x-z of its world (first camera), or aligned to the truth.
-  TopDownPlot plot;
-  std::vector<Eigen::Vector2d> est_path;
-  const Sim3d* align = nullptr;
-  std::optional<TrajectoryErrors> terr;
-  if (gt.has_value()) {
-    std::vector<TimedPose> est;
-    for (const auto& p : pipeline.trajectory())
-      est.push_back({p.index, p.timestamp_s, p.world_from_cam});
-    const std::vector<TimedPose> truth = TruthPoses(*gt);
-    auto e = EvaluateTrajectory(est, truth);
-    if (e.ok()) {
-      terr = *e;
-      align = &terr->truth_from_estimate;
-      std::vector<Eigen::Vector2d> gt_path;
-      for (const TimedPose& t : truth) gt_path.push_back(t.world_from_cam.translation.head<2>());
-      plot.AddPath(gt_path, cv::Scalar(60, 60, 60), "ground truth", 2);
-      for (const GtPlane& p : gt->planes) {
-        if (p.kind != PlaneKind::kFacade) continue;
-        for (const auto& poly : p.polygons_world) {
-          for (size_t i = 0; i + 1 < poly.size(); ++i) {
-            if (std::abs(poly[i].z()) < 1e-6 && std::abs(poly[i + 1].z()) < 1e-6) {
-              plot.AddSegment(poly[i].head<2>(), poly[i + 1].head<2>(), cv::Scalar(190, 190, 190),
-                              3);
-            }
-          }
-        }
-      }
-    } else {
-      std::printf("errors     not available: %s\n", e.status().ToString().c_str());
-    }
-  }
-  auto to_map = [&](const Eigen::Vector3d& x) -> Eigen::Vector2d {
-    if (align != nullptr) return ((*align) * x).head<2>();
-    return Eigen::Vector2d(x.x(), x.z());  // camera world: x right, z forward
-  };
-  for (const auto& p : pipeline.trajectory())
-    est_path.push_back(to_map(p.world_from_cam.translation));
-  for (const auto& [id, mp] : pipeline.plane_map()) {
-    std::vector<Eigen::Vector2d> pts;
-    for (const Eigen::Vector3d& x : mp.support_world) pts.push_back(to_map(x));
-    plot.AddPoints(std::move(pts), TrackColour(id), 1);
-  }
-  plot.AddPath(est_path, cv::Scalar(30, 30, 220), align ? "SLAPSE (Sim(3)-aligned)" : "SLAPSE", 2);
-  const std::string unit = align != nullptr || pipeline.metric() ? "m" : "first steps";
-  cv::imwrite(out_dir + "/map.png", plot.Render(900, 900, "trajectory and plane map", unit));
-
-  if (terr.has_value()) {
-    auto perr = EvaluatePlaneMap(plane_estimates, *gt, terr->first_step_scale);
-    std::printf("distance   %.1f m over %d poses\n", terr->distance_m, terr->poses);
-    std::printf("eps_D      %.2f %%   (paper: mean relative position error, first-step scale)\n",
-                100 * terr->eps_D);
-    std::printf("ATE        %.3f m   (RMSE after Sim(3) alignment, scale %.3f m/unit)\n",
-                terr->ate_rmse_m, terr->sim3_scale);
-    std::printf("RPE        %.3f m, %.3f deg per anchor step (RMSE)\n", terr->rpe_trans_rmse_m,
-                terr->rpe_rot_rmse_deg);
-    if (perr.ok()) {
-      std::printf("planes     %d evaluated (seen >= 0.5 s): eps_d %.2f m, eps_n %.2f deg\n",
-                  perr->planes_evaluated, perr->eps_d_m, perr->eps_n_deg);
-    }
-  }
+  MapAndErrors(pipeline, gt, plane_estimates, out_dir);
   std::printf("wrote      %s/{trajectory_tum.txt, trajectory_kitti.txt, planes.json, map.png}\n",
               out_dir.c_str());
   return stream_ok ? 0 : 1;

@@ -9,35 +9,40 @@
 #include <memory>
 #include <sstream>
 
+#include "api/convert.h"
 #include "client/cli/commands.h"
 #include "client/cli/flags.h"
 #include "client/lib/client.h"
-#include "api/convert.h"
 #include "core/common/intrinsics_io.h"
+#include "core/planes/plane_extraction.h"
 #include "server/server.h"
 
 namespace slapse::cli {
 namespace {
 
-const FlagSpec kServerFlag{"server", "HOST:PORT", "the slapse server", "localhost:50051"};
+// --server HOST:PORT, default: this machine on the server's default port.
+void AddServerFlag(CommandLine* cl, std::string* server) {
+  *server = "localhost:" + std::to_string(server::ServerOptions{}.port);
+  cl->app().add_option("--server", *server, "the slapse server")
+      ->type_name("HOST:PORT")
+      ->capture_default_str();
+}
 
-// Parses flags; returns -1 to go on, else the exit code (help printed or usage error).
-int ParseOrExit(Flags& flags, const char* command, int argc, char** argv, size_t positional) {
-  if (Status s = flags.Parse(argc, argv); !s.ok()) return Fail(command, s.message(), 2);
-  if (flags.help_requested()) {
-    std::printf("%s", flags.Usage().c_str());
-    return 0;
-  }
-  if (flags.positional().size() != positional) {
-    return Fail(command, "expected " + std::to_string(positional) + " argument(s) (see --help)", 2);
+// Parses; returns -1 to go on, else the exit code (help printed or usage error).
+int ParseOrExit(CommandLine& cl, int argc, char** argv, size_t positional) {
+  if (int rc = cl.Parse(argc, argv); rc >= 0) return rc;
+  if (cl.positional().size() != positional) {
+    return Fail(cl.command(),
+                "expected " + std::to_string(positional) + " argument(s) (see --help)", 2);
   }
   return -1;
 }
 
-std::unique_ptr<client::SlapseClient> Connect(const Flags& flags, double watch_timeout_s = 0) {
+std::unique_ptr<client::SlapseClient> Connect(const std::string& server,
+                                              double watch_timeout_s = 0) {
   client::ClientOptions o;
   o.watch_timeout_s = watch_timeout_s;
-  return client::SlapseClient::Connect(flags.GetString("server"), o);
+  return client::SlapseClient::Connect(server, o);
 }
 
 std::string Json(const google::protobuf::Message& m) {
@@ -77,30 +82,43 @@ void PrintSessionLine(const v1::Session& s) {
 }  // namespace
 
 int RunServe(int argc, char** argv) {
-  Flags flags(
-      "serve", "[options]   (runs until SIGINT or SIGTERM, then shuts down gracefully)",
-      {{"address", "ADDR", "address to listen on", "0.0.0.0"},
-       {"port", "PORT", "TCP port (0: pick a free one)", "50051"},
-       {"max-sessions", "N", "sessions active at once (worker threads)", "4"},
-       {"max-upload-mb", "MB", "bytes one upload may send, MiB (0: no limit)", "4096"},
-       {"event-ring", "N", "events kept per session for resuming watchers", "4096"},
-       {"rtsp-host", "IPV4", "address RTSP push listeners bind and advertise", "127.0.0.1"}});
-  if (int rc = ParseOrExit(flags, "serve", argc, argv, 0); rc >= 0) return rc;
+  CommandLine cl("serve", "[options]   (runs until SIGINT or SIGTERM, then shuts down gracefully)");
+  CLI::App& app = cl.app();
   server::ServerOptions o;
-  o.address = flags.GetString("address");
-  auto port = flags.GetInt("port", 0, 65535);
-  auto max_sessions = flags.GetInt("max-sessions", 1, 1024);
-  auto max_upload = flags.GetInt("max-upload-mb", 0, int64_t{1} << 30);
-  auto ring = flags.GetInt("event-ring", 1, int64_t{1} << 24);
-  for (const Status* s :
-       {&port.status(), &max_sessions.status(), &max_upload.status(), &ring.status()}) {
-    if (!s->ok()) return Fail("serve", s->message(), 2);
+  o.address = "0.0.0.0";  // the CLI serves every interface; the library binds 127.0.0.1
+  int64_t port = o.port, max_sessions = o.sessions.max_sessions;
+  int64_t max_upload_mb = o.sessions.max_upload_bytes >> 20;
+  int64_t ring = static_cast<int64_t>(o.sessions.event_ring_capacity);
+  app.add_option("--address", o.address, "address to listen on")
+      ->type_name("ADDR")
+      ->capture_default_str();
+  app.add_option("--port", port, "TCP port (0: pick a free one)")
+      ->type_name("PORT")
+      ->capture_default_str();
+  app.add_option("--max-sessions", max_sessions, "sessions active at once (worker threads)")
+      ->type_name("N")
+      ->capture_default_str();
+  app.add_option("--max-upload-mb", max_upload_mb, "bytes one upload may send, MiB (0: no limit)")
+      ->type_name("MB")
+      ->capture_default_str();
+  app.add_option("--event-ring", ring, "events kept per session for resuming watchers")
+      ->type_name("N")
+      ->capture_default_str();
+  app.add_option("--rtsp-host", o.sessions.rtsp_push_host,
+                 "address RTSP push listeners bind and advertise")
+      ->type_name("IPV4")
+      ->capture_default_str();
+  if (int rc = ParseOrExit(cl, argc, argv, 0); rc >= 0) return rc;
+  for (const Status& s : {CheckRange("port", port, int64_t{0}, int64_t{65535}),
+                          CheckRange("max-sessions", max_sessions, int64_t{1}, int64_t{1024}),
+                          CheckRange("max-upload-mb", max_upload_mb, int64_t{0}, int64_t{1} << 30),
+                          CheckRange("event-ring", ring, int64_t{1}, int64_t{1} << 24)}) {
+    if (!s.ok()) return Fail("serve", s.message(), 2);
   }
-  o.port = static_cast<int>(*port);
-  o.sessions.max_sessions = static_cast<int>(*max_sessions);
-  o.sessions.max_upload_bytes = *max_upload << 20;
-  o.sessions.event_ring_capacity = static_cast<size_t>(*ring);
-  o.sessions.rtsp_push_host = flags.GetString("rtsp-host");
+  o.port = static_cast<int>(port);
+  o.sessions.max_sessions = static_cast<int>(max_sessions);
+  o.sessions.max_upload_bytes = max_upload_mb << 20;
+  o.sessions.event_ring_capacity = static_cast<size_t>(ring);
 
   // Block the shutdown signals before gRPC starts its threads; wait for them below.
   sigset_t signals;
@@ -121,113 +139,151 @@ int RunServe(int argc, char** argv) {
   return 0;
 }
 
-int RunCreate(int argc, char** argv) {
-  Flags flags(
-      "create",
-      "--upload|--rtsp-pull URL|--rtsp-push PATH|--rtp-sdp FILE --intrinsics SPEC [options]\n"
-      "  (prints the session name; for --rtsp-push also the URL to publish to)",
-      {kServerFlag,
-       {"upload", "", "the stream comes through 'slapse upload'", ""},
-       {"rtsp-pull", "URL", "the server pulls rtsp[s]://[user:pass@]host[:port]/path (over TCP)",
-        ""},
-       {"rtsp-push", "PATH", "a camera publishes (RTSP ANNOUNCE/RECORD) to the printed URL", ""},
-       {"rtp-sdp", "FILE", "the server receives the RTP that this SDP file describes", ""},
-       {"start-timeout-ms", "MS", "network sources: wait for the first frame (0: 60000)", "0"},
-       {"receive-timeout-ms", "MS", "network sources: wait between frames (0: 5000)", "0"},
-       {"reconnect-attempts", "N",
-        "--rtsp-pull: retries per outage (drop, end, unreachable; 0: none)", "0"},
-       {"reconnect-interval-ms", "MS", "--rtsp-pull: wait before the first retry (0: 1000)", "0"},
-       {"reconnect-backoff", "X", "--rtsp-pull: each further wait is X times longer (0: 2)", "0"},
-       {"reconnect-max-interval-ms", "MS", "--rtsp-pull: longest wait (0: 30000)", "0"},
-       {"intrinsics", "SPEC", "FILE.json or 'fx,fy,cx,cy' (pixels)", ""},
-       {"eps-h", "PX", "homography inlier threshold (0: default)", "0"},
-       {"first-step-m", "M", "metric scale: length of the first tracked step", ""},
-       {"speed-kmh", "V", "metric scale: speed at the start", ""},
-       {"camera-height-m", "H", "metric scale: camera height above the road", ""}});
-  if (int rc = ParseOrExit(flags, "create", argc, argv, 0); rc >= 0) return rc;
-  const int sources = flags.GetBool("upload") + flags.Has("rtsp-pull") + flags.Has("rtsp-push") +
-                      flags.Has("rtp-sdp");
+namespace {
+
+// `create`'s source and network flags, bound by AddSourceFlags.
+struct SourceFlags {
+  std::string rtsp_pull, rtsp_push, rtp_sdp;
+  bool upload = false;
+  int64_t start_timeout_ms = 0, receive_timeout_ms = 0;
+  int64_t reconnect_attempts = 0, reconnect_interval_ms = 0, reconnect_max_interval_ms = 0;
+  double reconnect_backoff = 0;
+};
+
+void AddSourceFlags(CLI::App& app, SourceFlags* f) {
+  app.add_flag("--upload", f->upload, "the stream comes through 'slapse upload'");
+  app.add_option("--rtsp-pull", f->rtsp_pull,
+                 "the server pulls rtsp[s]://[user:pass@]host[:port]/path (over TCP)")
+      ->type_name("URL");
+  app.add_option("--rtsp-push", f->rtsp_push,
+                 "a camera publishes (RTSP ANNOUNCE/RECORD) to the printed URL")
+      ->type_name("PATH");
+  app.add_option("--rtp-sdp", f->rtp_sdp, "the server receives the RTP that this SDP file describes")
+      ->type_name("FILE");
+  // 0 = the server's default (the request's proto fields say so).
+  app.add_option("--start-timeout-ms", f->start_timeout_ms,
+                 "network sources: wait for the first frame (0: 60000)")
+      ->type_name("MS")
+      ->capture_default_str();
+  app.add_option("--receive-timeout-ms", f->receive_timeout_ms,
+                 "network sources: wait between frames (0: 5000)")
+      ->type_name("MS")
+      ->capture_default_str();
+  app.add_option("--reconnect-attempts", f->reconnect_attempts,
+                 "--rtsp-pull: retries per outage (drop, end, unreachable; 0: none)")
+      ->type_name("N")
+      ->capture_default_str();
+  app.add_option("--reconnect-interval-ms", f->reconnect_interval_ms,
+                 "--rtsp-pull: wait before the first retry (0: 1000)")
+      ->type_name("MS")
+      ->capture_default_str();
+  app.add_option("--reconnect-backoff", f->reconnect_backoff,
+                 "--rtsp-pull: each further wait is X times longer (0: 2)")
+      ->type_name("X")
+      ->capture_default_str();
+  app.add_option("--reconnect-max-interval-ms", f->reconnect_max_interval_ms,
+                 "--rtsp-pull: longest wait (0: 30000)")
+      ->type_name("MS")
+      ->capture_default_str();
+}
+
+// Fills the request's source from the flags; INVALID_ARGUMENT is a usage error.
+Status SetSource(const CommandLine& cl, const SourceFlags& f, v1::Session* request) {
+  const int sources = f.upload + cl.Has("rtsp-pull") + cl.Has("rtsp-push") + cl.Has("rtp-sdp");
   if (sources != 1) {
-    return Fail("create",
-                "give one source: --upload, --rtsp-pull URL, --rtsp-push PATH or --rtp-sdp FILE",
-                2);
+    return InvalidArgumentError(
+        "give one source: --upload, --rtsp-pull URL, --rtsp-push PATH or --rtp-sdp FILE");
   }
-  auto start_ms = flags.GetInt("start-timeout-ms", 0, 3600000);
-  auto receive_ms = flags.GetInt("receive-timeout-ms", 0, 3600000);
-  if (!start_ms.ok()) return Fail("create", start_ms.status().message(), 2);
-  if (!receive_ms.ok()) return Fail("create", receive_ms.status().message(), 2);
-  const std::string spec = flags.GetString("intrinsics");
-  if (spec.empty()) return Fail("create", "--intrinsics is required", 2);
-  if (spec.rfind("hfov=", 0) == 0) {
-    return Fail("create", "hfov= needs the stream size; give FILE.json or 'fx,fy,cx,cy'", 2);
-  }
-  StatusOr<Intrinsics> k = spec.size() > 5 && spec.substr(spec.size() - 5) == ".json"
-                               ? ReadIntrinsicsJson(spec)
-                               : ParseIntrinsicsSpec(spec, 0, 0);
-  if (!k.ok()) return Fail("create", k.status().message(), 2);
-  v1::Session request;
-  if (flags.Has("rtsp-pull")) {
+  SLAPSE_RETURN_IF_ERROR(
+      CheckRange("start-timeout-ms", f.start_timeout_ms, int64_t{0}, int64_t{3600000}));
+  SLAPSE_RETURN_IF_ERROR(
+      CheckRange("receive-timeout-ms", f.receive_timeout_ms, int64_t{0}, int64_t{3600000}));
+  const int start_ms = static_cast<int>(f.start_timeout_ms);
+  const int receive_ms = static_cast<int>(f.receive_timeout_ms);
+  if (cl.Has("rtsp-pull")) {
     // Ranges are the server's (it answers INVALID_ARGUMENT with the reason).
-    auto attempts = flags.GetInt("reconnect-attempts", 0, INT32_MAX);
-    auto interval = flags.GetInt("reconnect-interval-ms", 0, INT32_MAX);
-    auto backoff = flags.GetDouble("reconnect-backoff", 0, 1e9);
-    auto max_interval = flags.GetInt("reconnect-max-interval-ms", 0, INT32_MAX);
-    for (const Status* s :
-         {&attempts.status(), &interval.status(), &backoff.status(), &max_interval.status()}) {
-      if (!s->ok()) return Fail("create", s->message(), 2);
-    }
-    v1::RtspPull* pull = request.mutable_rtsp_pull();
-    pull->set_url(flags.GetString("rtsp-pull"));
-    pull->set_start_timeout_ms(static_cast<int>(*start_ms));
-    pull->set_receive_timeout_ms(static_cast<int>(*receive_ms));
-    pull->mutable_reconnect()->set_max_attempts(static_cast<int>(*attempts));
-    pull->mutable_reconnect()->set_initial_interval_ms(static_cast<int>(*interval));
-    pull->mutable_reconnect()->set_backoff_multiplier(*backoff);
-    pull->mutable_reconnect()->set_max_interval_ms(static_cast<int>(*max_interval));
-  } else if (flags.Has("rtsp-push")) {
-    request.mutable_rtsp_push()->set_path(flags.GetString("rtsp-push"));
-    request.mutable_rtsp_push()->set_start_timeout_ms(static_cast<int>(*start_ms));
-    request.mutable_rtsp_push()->set_receive_timeout_ms(static_cast<int>(*receive_ms));
-  } else if (flags.Has("rtp-sdp")) {
-    std::ifstream in(flags.GetString("rtp-sdp"), std::ios::binary);
-    if (!in) return Fail("create", "cannot read " + flags.GetString("rtp-sdp"), 2);
+    SLAPSE_RETURN_IF_ERROR(
+        CheckRange("reconnect-attempts", f.reconnect_attempts, int64_t{0}, int64_t{INT32_MAX}));
+    SLAPSE_RETURN_IF_ERROR(CheckRange("reconnect-interval-ms", f.reconnect_interval_ms,
+                                      int64_t{0}, int64_t{INT32_MAX}));
+    SLAPSE_RETURN_IF_ERROR(CheckRange("reconnect-backoff", f.reconnect_backoff, 0, 1e9));
+    SLAPSE_RETURN_IF_ERROR(CheckRange("reconnect-max-interval-ms", f.reconnect_max_interval_ms,
+                                      int64_t{0}, int64_t{INT32_MAX}));
+    v1::RtspPull* pull = request->mutable_rtsp_pull();
+    pull->set_url(f.rtsp_pull);
+    pull->set_start_timeout_ms(start_ms);
+    pull->set_receive_timeout_ms(receive_ms);
+    pull->mutable_reconnect()->set_max_attempts(static_cast<int>(f.reconnect_attempts));
+    pull->mutable_reconnect()->set_initial_interval_ms(static_cast<int>(f.reconnect_interval_ms));
+    pull->mutable_reconnect()->set_backoff_multiplier(f.reconnect_backoff);
+    pull->mutable_reconnect()->set_max_interval_ms(static_cast<int>(f.reconnect_max_interval_ms));
+  } else if (cl.Has("rtsp-push")) {
+    request->mutable_rtsp_push()->set_path(f.rtsp_push);
+    request->mutable_rtsp_push()->set_start_timeout_ms(start_ms);
+    request->mutable_rtsp_push()->set_receive_timeout_ms(receive_ms);
+  } else if (cl.Has("rtp-sdp")) {
+    std::ifstream in(f.rtp_sdp, std::ios::binary);
+    if (!in) return InvalidArgumentError("cannot read " + f.rtp_sdp);
     std::ostringstream sdp;
     sdp << in.rdbuf();
-    request.mutable_rtp_sdp()->set_sdp(sdp.str());
-    request.mutable_rtp_sdp()->set_start_timeout_ms(static_cast<int>(*start_ms));
-    request.mutable_rtp_sdp()->set_receive_timeout_ms(static_cast<int>(*receive_ms));
+    request->mutable_rtp_sdp()->set_sdp(sdp.str());
+    request->mutable_rtp_sdp()->set_start_timeout_ms(start_ms);
+    request->mutable_rtp_sdp()->set_receive_timeout_ms(receive_ms);
   } else {
-    request.mutable_upload();
+    request->mutable_upload();
   }
+  return Status::Ok();
+}
+
+// --intrinsics for a session: FILE.json or 'fx,fy,cx,cy' (the stream size is not known here).
+StatusOr<Intrinsics> SessionIntrinsics(const std::string& spec) {
+  if (spec.empty()) return InvalidArgumentError("--intrinsics is required");
+  if (spec.rfind("hfov=", 0) == 0) {
+    return InvalidArgumentError("hfov= needs the stream size; give FILE.json or 'fx,fy,cx,cy'");
+  }
+  return spec.size() > 5 && spec.substr(spec.size() - 5) == ".json"
+             ? ReadIntrinsicsJson(spec)
+             : ParseIntrinsicsSpec(spec, 0, 0);
+}
+
+}  // namespace
+
+int RunCreate(int argc, char** argv) {
+  CommandLine cl("create",
+                 "--upload|--rtsp-pull URL|--rtsp-push PATH|--rtp-sdp FILE --intrinsics SPEC "
+                 "[options]\n  (prints the session name; for --rtsp-push also the URL to publish to)");
+  CLI::App& app = cl.app();
+  std::string server, intrinsics_spec;
+  AddServerFlag(&cl, &server);
+  SourceFlags source;
+  AddSourceFlags(app, &source);
+  app.add_option("--intrinsics", intrinsics_spec, "FILE.json or 'fx,fy,cx,cy' (pixels)")
+      ->type_name("SPEC");
+  // 0 asks for the server's default, which is this default.
+  double eps_h_px = PlaneExtractionOptions{}.eps_h_px;
+  app.add_option("--eps-h", eps_h_px, "homography inlier threshold (0: the server's default)")
+      ->type_name("PX")
+      ->capture_default_str();
+  ScaleFlags scale_flags;
+  scale_flags.AddTo(&cl);
+  if (int rc = ParseOrExit(cl, argc, argv, 0); rc >= 0) return rc;
+  v1::Session request;
+  if (Status s = SetSource(cl, source, &request); !s.ok()) return Fail("create", s.message(), 2);
+  StatusOr<Intrinsics> k = SessionIntrinsics(intrinsics_spec);
+  if (!k.ok()) return Fail("create", k.status().message(), 2);
   *request.mutable_intrinsics() = api::IntrinsicsToProto(*k);
-  v1::PipelineOptions* po = request.mutable_pipeline_options();
-  auto eps = flags.GetDouble("eps-h", 0, 100);
-  if (!eps.ok()) return Fail("create", eps.status().message(), 2);
-  po->set_eps_h_px(*eps);
-  int scale_sources = 0;
-  if (flags.Has("first-step-m")) {
-    auto v = flags.GetDouble("first-step-m", 1e-3, 1e3);
-    if (!v.ok()) return Fail("create", v.status().message(), 2);
-    po->set_scale_source(v1::PipelineOptions::FIRST_STEP);
-    po->set_first_step_m(*v);
-    ++scale_sources;
+  if (Status s = CheckRange("eps-h", eps_h_px, 0, 100); !s.ok()) {
+    return Fail("create", s.message(), 2);
   }
-  if (flags.Has("speed-kmh")) {
-    auto v = flags.GetDouble("speed-kmh", 0.1, 500);
-    if (!v.ok()) return Fail("create", v.status().message(), 2);
-    po->set_scale_source(v1::PipelineOptions::SPEED);
-    po->set_speed_mps(*v / 3.6);
-    ++scale_sources;
-  }
-  if (flags.Has("camera-height-m")) {
-    auto v = flags.GetDouble("camera-height-m", 0.05, 100);
-    if (!v.ok()) return Fail("create", v.status().message(), 2);
-    po->set_scale_source(v1::PipelineOptions::CAMERA_HEIGHT);
-    po->set_camera_height_m(*v);
-    ++scale_sources;
-  }
-  if (scale_sources > 1) return Fail("create", "give at most one scale source", 2);
-  auto session = Connect(flags)->CreateSession(request);
+  // The options travel as core structs through the one conversion (api/convert.h);
+  // eps_h 0 asks for the server's default.
+  auto scale = scale_flags.Options();
+  if (!scale.ok()) return Fail("create", scale.status().message(), 2);
+  PipelineOptions options;
+  options.extraction.eps_h_px = eps_h_px;
+  options.scale = *scale;
+  *request.mutable_pipeline_options() = api::PipelineOptionsToProto(options);
+  auto session = Connect(server)->CreateSession(request);
   if (!session.ok()) return Fail("create", session.status().ToString());
   std::printf("%s\n", session->name().c_str());
   if (!session->ingest_url().empty()) std::printf("%s\n", session->ingest_url().c_str());
@@ -235,25 +291,33 @@ int RunCreate(int argc, char** argv) {
 }
 
 int RunUpload(int argc, char** argv) {
-  Flags flags("upload", "SESSION FILE   (sends FILE as the session's stream)", {kServerFlag});
-  if (int rc = ParseOrExit(flags, "upload", argc, argv, 2); rc >= 0) return rc;
-  auto session = Connect(flags)->UploadFile(flags.positional()[0], flags.positional()[1]);
+  CommandLine cl("upload", "SESSION FILE   (sends FILE as the session's stream)", "SESSION FILE");
+  std::string server;
+  AddServerFlag(&cl, &server);
+  if (int rc = ParseOrExit(cl, argc, argv, 2); rc >= 0) return rc;
+  auto session = Connect(server)->UploadFile(cl.positional()[0], cl.positional()[1]);
   if (!session.ok()) return Fail("upload", session.status().ToString());
   PrintSessionLine(*session);
   return 0;
 }
 
 int RunWatch(int argc, char** argv) {
-  Flags flags("watch", "SESSION [options]   (until the session ends; resume with --after)",
-              {kServerFlag,
-               {"after", "N", "only events after sequence N", "0"},
-               {"json", "", "one JSON object per line", ""}});
-  if (int rc = ParseOrExit(flags, "watch", argc, argv, 1); rc >= 0) return rc;
-  auto after = flags.GetInt("after", 0, INT64_MAX);
-  if (!after.ok()) return Fail("watch", after.status().message(), 2);
-  const bool json = flags.GetBool("json");
-  Status s = Connect(flags)->Watch(
-      flags.positional()[0], static_cast<uint64_t>(*after), [&](const v1::SessionEvent& e) {
+  CommandLine cl("watch", "SESSION [options]   (until the session ends; resume with --after)",
+                 "SESSION");
+  std::string server;
+  AddServerFlag(&cl, &server);
+  int64_t after = 0;
+  bool json = false;
+  cl.app().add_option("--after", after, "only events after sequence N")
+      ->type_name("N")
+      ->capture_default_str();
+  cl.app().add_flag("--json", json, "one JSON object per line");
+  if (int rc = ParseOrExit(cl, argc, argv, 1); rc >= 0) return rc;
+  if (Status s = CheckRange("after", after, int64_t{0}, INT64_MAX); !s.ok()) {
+    return Fail("watch", s.message(), 2);
+  }
+  Status s = Connect(server)->Watch(
+      cl.positional()[0], static_cast<uint64_t>(after), [&](const v1::SessionEvent& e) {
         if (json) {
           std::printf("%s\n", Json(e).c_str());
         } else if (e.has_pose()) {
@@ -290,15 +354,17 @@ int RunWatch(int argc, char** argv) {
 }
 
 int RunList(int argc, char** argv) {
-  Flags flags(
-      "list", "[options]",
-      {kServerFlag, {"state", "STATE", "only CREATED, RUNNING, FINISHED, FAILED or STOPPED", ""}});
-  if (int rc = ParseOrExit(flags, "list", argc, argv, 0); rc >= 0) return rc;
+  CommandLine cl("list", "[options]");
+  std::string server, state_name;
+  AddServerFlag(&cl, &server);
+  cl.app().add_option("--state", state_name, "only CREATED, RUNNING, FINISHED, FAILED or STOPPED")
+      ->type_name("STATE");
+  if (int rc = ParseOrExit(cl, argc, argv, 0); rc >= 0) return rc;
   v1::Session::State state = v1::Session::STATE_UNSPECIFIED;
-  if (flags.Has("state") && !v1::Session::State_Parse(flags.GetString("state"), &state)) {
-    return Fail("list", "unknown --state '" + flags.GetString("state") + "'", 2);
+  if (cl.Has("state") && !v1::Session::State_Parse(state_name, &state)) {
+    return Fail("list", "unknown --state '" + state_name + "'", 2);
   }
-  auto c = Connect(flags);
+  auto c = Connect(server);
   std::string token;
   do {
     auto page = c->ListSessions(100, token, state);
@@ -310,11 +376,15 @@ int RunList(int argc, char** argv) {
 }
 
 int RunGet(int argc, char** argv) {
-  Flags flags("get", "SESSION [options]", {kServerFlag, {"json", "", "the session as JSON", ""}});
-  if (int rc = ParseOrExit(flags, "get", argc, argv, 1); rc >= 0) return rc;
-  auto s = Connect(flags)->GetSession(flags.positional()[0]);
+  CommandLine cl("get", "SESSION [options]", "SESSION");
+  std::string server;
+  AddServerFlag(&cl, &server);
+  bool json = false;
+  cl.app().add_flag("--json", json, "the session as JSON");
+  if (int rc = ParseOrExit(cl, argc, argv, 1); rc >= 0) return rc;
+  auto s = Connect(server)->GetSession(cl.positional()[0]);
   if (!s.ok()) return Fail("get", s.status().ToString());
-  if (flags.GetBool("json")) {
+  if (json) {
     std::printf("%s\n", Json(*s).c_str());
   } else {
     PrintSessionLine(*s);
@@ -323,18 +393,22 @@ int RunGet(int argc, char** argv) {
 }
 
 int RunStop(int argc, char** argv) {
-  Flags flags("stop", "SESSION   (ends it STOPPED; results are kept)", {kServerFlag});
-  if (int rc = ParseOrExit(flags, "stop", argc, argv, 1); rc >= 0) return rc;
-  auto s = Connect(flags)->StopSession(flags.positional()[0]);
+  CommandLine cl("stop", "SESSION   (ends it STOPPED; results are kept)", "SESSION");
+  std::string server;
+  AddServerFlag(&cl, &server);
+  if (int rc = ParseOrExit(cl, argc, argv, 1); rc >= 0) return rc;
+  auto s = Connect(server)->StopSession(cl.positional()[0]);
   if (!s.ok()) return Fail("stop", s.status().ToString());
   PrintSessionLine(*s);
   return 0;
 }
 
 int RunDelete(int argc, char** argv) {
-  Flags flags("delete", "SESSION   (stops it and forgets it)", {kServerFlag});
-  if (int rc = ParseOrExit(flags, "delete", argc, argv, 1); rc >= 0) return rc;
-  Status s = Connect(flags)->DeleteSession(flags.positional()[0]);
+  CommandLine cl("delete", "SESSION   (stops it and forgets it)", "SESSION");
+  std::string server;
+  AddServerFlag(&cl, &server);
+  if (int rc = ParseOrExit(cl, argc, argv, 1); rc >= 0) return rc;
+  Status s = Connect(server)->DeleteSession(cl.positional()[0]);
   if (!s.ok()) return Fail("delete", s.ToString());
   return 0;
 }

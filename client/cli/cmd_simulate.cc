@@ -9,6 +9,9 @@
 namespace slapse::cli {
 namespace {
 
+// H.264's CRF when --quality is not given (MPEG codecs use EncoderOptions{}.quality).
+constexpr int kH264Quality = 20;
+
 // "IBBBP" -> 3 B frames, "IPPP" / "IP" -> 0.
 StatusOr<int> ParseGopPattern(const std::string& gop) {
   if (gop.size() < 2 || gop[0] != 'I' || gop.back() != 'P') {
@@ -20,81 +23,114 @@ StatusOr<int> ParseGopPattern(const std::string& gop) {
   return InvalidArgumentError("--gop must look like IBBBP, IBBP or IPPP, got '" + gop + "'");
 }
 
+// simulate's flags, bound to a SimulateOptions (defaults: SimulateOptions{}).
+struct SimulateFlags {
+  SimulateOptions opt;
+  std::string codec_name = VideoCodecName(opt.encoder.codec), gop = "IBBBP";
+  int64_t seed = static_cast<int64_t>(opt.seed), gop_size = opt.encoder.gop_size;
+  int64_t width = opt.width_px, height = opt.height_px, quality = opt.encoder.quality;
+  // km/h on the command line, m/s in SimulateOptions: converted only when given,
+  // so the defaults stay SimulateOptions{}'s exact values.
+  double min_kmh = opt.min_speed_mps * 3.6, max_kmh = opt.max_speed_mps * 3.6;
+  bool no_trees = false;
+
+  void AddTo(CLI::App& app) {
+    app.add_option("--out", opt.output_dir, "output directory (created)")->type_name("DIR");
+    app.add_option("--seed", seed, "scene and path seed")->type_name("N")->capture_default_str();
+    app.add_option("--codec", codec_name, "mpeg2, mpeg4 or h264")
+        ->type_name("NAME")
+        ->capture_default_str();
+    app.add_option("--gop", gop, "IBBBP (n_B = 3), IBBP, IPPP ...")
+        ->type_name("PATTERN")
+        ->capture_default_str();
+    app.add_option("--gop-size", gop_size, "frames from one I frame to the next")
+        ->type_name("N")
+        ->capture_default_str();
+    app.add_option("--quality", quality, "MPEG quantiser 1..31, or H.264 CRF 0..51")
+        ->type_name("Q")
+        ->default_str(std::to_string(quality) + " (MPEG), " + std::to_string(kH264Quality) +
+                      " (H.264)");
+    app.add_option("--duration-s", opt.duration_s, "length of the drive in seconds")
+        ->type_name("S")
+        ->capture_default_str();
+    app.add_option("--fps", opt.fps, "frame rate")->type_name("F")->capture_default_str();
+    app.add_option("--width", width, "frame width")->type_name("PX")->capture_default_str();
+    app.add_option("--height", height, "frame height")->type_name("PX")->capture_default_str();
+    app.add_option("--hfov-deg", opt.hfov_deg, "horizontal field of view")
+        ->type_name("DEG")
+        ->capture_default_str();
+    app.add_option("--min-speed-kmh", min_kmh, "slowest speed of the car")
+        ->type_name("V")
+        ->capture_default_str();
+    app.add_option("--max-speed-kmh", max_kmh, "fastest speed of the car")
+        ->type_name("V")
+        ->capture_default_str();
+    app.add_flag("--no-trees", no_trees, "leave out the non-planar clutter");
+    app.add_option("--video-name", opt.video_name,
+                   "video file name; its extension picks the container")
+        ->type_name("FILE")
+        ->capture_default_str();
+  }
+
+  // Range checks; fills `opt` (usage errors as INVALID_ARGUMENT).
+  Status Apply(const CommandLine& cl);
+};
+
+Status SimulateFlags::Apply(const CommandLine& cl) {
+  opt.trees = !no_trees;
+  auto codec = ParseVideoCodec(codec_name);
+  auto b_frames = ParseGopPattern(gop);
+  for (const Status& s :
+       {codec.status(), b_frames.status(), CheckRange("seed", seed, int64_t{0}, INT64_MAX),
+        CheckRange("gop-size", gop_size, int64_t{1}, int64_t{600}),
+        CheckRange("duration-s", opt.duration_s, 0.2, 600), CheckRange("fps", opt.fps, 1, 120),
+        CheckRange("width", width, int64_t{64}, int64_t{4096}),
+        CheckRange("height", height, int64_t{64}, int64_t{4096}),
+        CheckRange("hfov-deg", opt.hfov_deg, 20, 150), CheckRange("min-speed-kmh", min_kmh, 1, 200),
+        CheckRange("max-speed-kmh", max_kmh, 1, 200)}) {
+    if (!s.ok()) return s;
+  }
+  if (cl.Has("min-speed-kmh")) opt.min_speed_mps = min_kmh / 3.6;
+  if (cl.Has("max-speed-kmh")) opt.max_speed_mps = max_kmh / 3.6;
+  if (opt.min_speed_mps > opt.max_speed_mps) {
+    return InvalidArgumentError("--min-speed-kmh exceeds --max-speed-kmh");
+  }
+  if (width % 2 || height % 2) return InvalidArgumentError("--width and --height must be even");
+  opt.seed = static_cast<uint64_t>(seed);
+  opt.width_px = static_cast<int>(width);
+  opt.height_px = static_cast<int>(height);
+  opt.encoder.codec = *codec;
+  opt.encoder.b_frames = *b_frames;
+  opt.encoder.gop_size = static_cast<int>(gop_size);
+  if (cl.Has("quality")) {
+    SLAPSE_RETURN_IF_ERROR(CheckRange("quality", quality, int64_t{0}, int64_t{51}));
+    opt.encoder.quality = static_cast<int>(quality);
+  } else if (*codec == VideoCodec::kH264) {
+    opt.encoder.quality = kH264Quality;
+  }
+
+  return Status::Ok();
+}
+
 }  // namespace
 
 int RunSimulate(int argc, char** argv) {
-  Flags flags(
-      "simulate", "--out DIR [options]",
-      {{"out", "DIR", "output directory (created)", ""},
-       {"seed", "N", "scene and path seed", "1"},
-       {"codec", "NAME", "mpeg2, mpeg4 or h264", "mpeg2"},
-       {"gop", "PATTERN", "IBBBP (n_B = 3), IBBP, IPPP ...", "IBBBP"},
-       {"gop-size", "N", "frames from one I frame to the next", "12"},
-       {"quality", "Q", "MPEG quantiser 1..31, or H.264 CRF 0..51", "4 (MPEG), 20 (H.264)"},
-       {"duration-s", "S", "length of the drive in seconds", "10"},
-       {"fps", "F", "frame rate", "30"},
-       {"width", "PX", "frame width", "640"},
-       {"height", "PX", "frame height", "480"},
-       {"hfov-deg", "DEG", "horizontal field of view", "70"},
-       {"min-speed-kmh", "V", "slowest speed of the car", "25"},
-       {"max-speed-kmh", "V", "fastest speed of the car", "50"},
-       {"no-trees", "", "leave out the non-planar clutter", ""},
-       {"video-name", "FILE", "video file name; its extension picks the container", "drive.ts"}});
-  if (Status s = flags.Parse(argc, argv); !s.ok()) return Fail("simulate", s.message(), 2);
-  if (flags.help_requested()) {
-    std::printf("%s", flags.Usage().c_str());
-    return 0;
+  CommandLine cl("simulate", "--out DIR [options]");
+  SimulateFlags flags;
+  flags.AddTo(cl.app());
+  if (int rc = cl.Parse(argc, argv); rc >= 0) return rc;
+  if (!cl.positional().empty()) {
+    return Fail("simulate", "unexpected argument '" + cl.positional()[0] + "'", 2);
   }
-  if (!flags.positional().empty()) {
-    return Fail("simulate", "unexpected argument '" + flags.positional()[0] + "'", 2);
-  }
-  if (!flags.Has("out")) return Fail("simulate", "--out DIR is required (see --help)", 2);
-
-  SimulateOptions opt;
-  opt.output_dir = flags.GetString("out");
-  opt.video_name = flags.GetString("video-name");
-  opt.trees = !flags.GetBool("no-trees");
-  auto codec = ParseVideoCodec(flags.GetString("codec"));
-  auto b_frames = ParseGopPattern(flags.GetString("gop"));
-  auto seed = flags.GetInt("seed", 0, INT64_MAX);
-  auto gop_size = flags.GetInt("gop-size", 1, 600);
-  auto duration = flags.GetDouble("duration-s", 0.2, 600);
-  auto fps = flags.GetDouble("fps", 1, 120);
-  auto width = flags.GetInt("width", 64, 4096);
-  auto height = flags.GetInt("height", 64, 4096);
-  auto hfov = flags.GetDouble("hfov-deg", 20, 150);
-  auto vmin = flags.GetDouble("min-speed-kmh", 1, 200);
-  auto vmax = flags.GetDouble("max-speed-kmh", 1, 200);
-  for (const Status* s : {&codec.status(), &b_frames.status(), &seed.status(), &gop_size.status(),
-                          &duration.status(), &fps.status(), &width.status(), &height.status(),
-                          &hfov.status(), &vmin.status(), &vmax.status()}) {
-    if (!s->ok()) return Fail("simulate", s->message(), 2);
-  }
-  if (*vmin > *vmax) return Fail("simulate", "--min-speed-kmh exceeds --max-speed-kmh", 2);
-  if (*width % 2 || *height % 2) return Fail("simulate", "--width and --height must be even", 2);
-  opt.seed = static_cast<uint64_t>(*seed);
-  opt.duration_s = *duration;
-  opt.fps = *fps;
-  opt.width_px = static_cast<int>(*width);
-  opt.height_px = static_cast<int>(*height);
-  opt.hfov_deg = *hfov;
-  opt.min_speed_mps = *vmin / 3.6;
-  opt.max_speed_mps = *vmax / 3.6;
-  opt.encoder.codec = *codec;
-  opt.encoder.b_frames = *b_frames;
-  opt.encoder.gop_size = static_cast<int>(*gop_size);
-  if (flags.Has("quality")) {
-    auto q = flags.GetInt("quality", 0, 51);
-    if (!q.ok()) return Fail("simulate", q.status().message(), 2);
-    opt.encoder.quality = static_cast<int>(*q);
-  } else {
-    opt.encoder.quality = *codec == VideoCodec::kH264 ? 20 : 4;
-  }
+  if (!cl.Has("out")) return Fail("simulate", "--out DIR is required (see --help)", 2);
+  if (Status s = flags.Apply(cl); !s.ok()) return Fail("simulate", s.message(), 2);
+  const SimulateOptions& opt = flags.opt;
+  const std::string& gop = flags.gop;
 
   SimulateReport report;
   if (Status s = SimulateDrive(opt, &report); !s.ok()) return Fail("simulate", s.ToString());
   std::printf("video      %s (%s, %s, %d frames, %dx%d @ %.0f fps)\n", report.video_path.c_str(),
-              VideoCodecName(opt.encoder.codec), flags.GetString("gop").c_str(), report.frames,
+              VideoCodecName(opt.encoder.codec), gop.c_str(), report.frames,
               opt.width_px, opt.height_px, opt.fps);
   std::printf("drive      %.1f m, %d planes in the scene, seed %llu\n", report.distance_m,
               report.num_planes, static_cast<unsigned long long>(opt.seed));

@@ -1,109 +1,111 @@
 #include "client/cli/flags.h"
 
-#include "core/common/intrinsics_io.h"
-
-#include <cerrno>
-#include <cmath>
-#include <cstdlib>
+#include <algorithm>
+#include <cstdio>
 #include <filesystem>
 #include <sstream>
 
+#include "client/cli/commands.h"
+#include "core/common/intrinsics_io.h"
+
 namespace slapse::cli {
 
-const FlagSpec* Flags::Find(const std::string& name) const {
-  for (const FlagSpec& s : specs_) {
-    if (s.name == name) return &s;
-  }
-  return nullptr;
+CommandLine::CommandLine(const std::string& command, const std::string& synopsis,
+                         const std::string& positional_name)
+    : command_(command), app_("usage: slapse " + command + " " + synopsis, "slapse " + command) {
+  app_.add_option(positional_name, positional_, "")->group("");  // the synopsis shows them
+  // Unknown options are collected and reported by Parse, before --help.
+  app_.allow_extras();
+  // A switch takes no value: --quiet=1 is a usage error, as it always was.
+  app_.option_defaults()->disable_flag_override();
 }
 
-Status Flags::Parse(int argc, char** argv) {
-  for (int i = 0; i < argc; ++i) {
-    std::string arg = argv[i];
-    if (arg == "--help" || arg == "-h") {
-      help_ = true;
-      continue;
-    }
-    if (arg.rfind("--", 0) != 0 || arg == "--") {
-      positional_.push_back(arg);
-      continue;
-    }
-    std::string name = arg.substr(2), value;
-    bool has_value = false;
-    if (const size_t eq = name.find('='); eq != std::string::npos) {
-      value = name.substr(eq + 1);
-      name = name.substr(0, eq);
-      has_value = true;
-    }
-    const FlagSpec* spec = Find(name);
-    if (spec == nullptr) {
-      return InvalidArgumentError("unknown option --" + name + " (see 'slapse " + command_ +
-                                  " --help')");
-    }
-    if (spec->meta.empty()) {
-      if (has_value) return InvalidArgumentError("--" + name + " takes no value");
-      values_[name] = "1";
-      continue;
-    }
-    if (!has_value) {
-      if (i + 1 >= argc) return InvalidArgumentError("--" + name + " needs a value " + spec->meta);
-      value = argv[++i];
-    }
-    values_[name] = value;
+namespace {
+
+// The first unknown option among CLI11's leftovers, or "".
+std::string UnknownOption(const std::vector<std::string>& remaining) {
+  for (const std::string& arg : remaining) {
+    if (arg.rfind("-", 0) == 0 && arg != "-") return arg.substr(0, arg.find('='));
   }
-  return Status::Ok();
+  return remaining.empty() ? "" : remaining.front();
 }
 
-std::string Flags::Usage() const {
+}  // namespace
+
+int CommandLine::Parse(int argc, char** argv) {
+  // CLI11 takes the arguments of a vector last to first.
+  std::vector<std::string> args(argv, argv + argc);
+  std::reverse(args.begin(), args.end());
+  bool help = false;
+  try {
+    app_.parse(args);
+  } catch (const CLI::CallForHelp&) {
+    help = true;
+  } catch (const CLI::ParseError& e) {
+    return Fail(command_.c_str(), std::string(e.what()) + " (see 'slapse " + command_ + " --help')",
+                2);
+  }
+  if (const std::string unknown = UnknownOption(app_.remaining()); !unknown.empty()) {
+    return Fail(command_.c_str(),
+                "unknown option " + unknown + " (see 'slapse " + command_ + " --help')", 2);
+  }
+  if (help) {
+    std::printf("%s", app_.help().c_str());
+    return 0;
+  }
+  return -1;
+}
+
+bool CommandLine::Has(const std::string& name) const { return app_.count("--" + name) > 0; }
+
+Status CheckRange(const std::string& name, double v, double min, double max) {
+  if (v >= min && v <= max) return Status::Ok();
   std::ostringstream os;
-  os << "usage: slapse " << command_ << " " << synopsis_ << "\n\noptions:\n";
-  std::vector<FlagSpec> all = specs_;
-  all.push_back({"help", "", "this text", ""});
-  for (const FlagSpec& s : all) {
-    std::string left = "  --" + s.name + (s.meta.empty() ? "" : " " + s.meta);
-    if (left.size() < 28) left.resize(28, ' ');
-    os << left << " " << s.help;
-    if (!s.default_value.empty()) os << " (default " << s.default_value << ")";
-    os << "\n";
-  }
-  return os.str();
+  os << "--" << name << " must be in [" << min << ", " << max << "], got " << v;
+  return InvalidArgumentError(os.str());
 }
 
-std::string Flags::GetString(const std::string& name) const {
-  if (auto it = values_.find(name); it != values_.end()) return it->second;
-  const FlagSpec* spec = Find(name);
-  return spec != nullptr ? spec->default_value : "";
+Status CheckRange(const std::string& name, int64_t v, int64_t min, int64_t max) {
+  if (v >= min && v <= max) return Status::Ok();
+  return InvalidArgumentError("--" + name + " must be in [" + std::to_string(min) + ", " +
+                              std::to_string(max) + "], got " + std::to_string(v));
 }
 
-StatusOr<int64_t> Flags::GetInt(const std::string& name, int64_t min, int64_t max) const {
-  const std::string text = GetString(name);
-  errno = 0;
-  char* end = nullptr;
-  const long long v = std::strtoll(text.c_str(), &end, 10);
-  if (text.empty() || *end != '\0' || errno != 0) {
-    return InvalidArgumentError("--" + name + " must be an integer, got '" + text + "'");
-  }
-  if (v < min || v > max) {
-    return InvalidArgumentError("--" + name + " must be in [" + std::to_string(min) + ", " +
-                                std::to_string(max) + "], got " + text);
-  }
-  return static_cast<int64_t>(v);
+void ScaleFlags::AddTo(CommandLine* command_line) {
+  command_line_ = command_line;
+  CLI::App& app = command_line->app();
+  app.add_option("--first-step-m", first_step_m_,
+                 "metric scale: length of the first tracked step")
+      ->type_name("M");
+  app.add_option("--speed-kmh", speed_kmh_, "metric scale: speed at the start")->type_name("V");
+  app.add_option("--camera-height-m", camera_height_m_,
+                 "metric scale: camera height above the road plane")
+      ->type_name("H");
 }
 
-StatusOr<double> Flags::GetDouble(const std::string& name, double min, double max) const {
-  const std::string text = GetString(name);
-  errno = 0;
-  char* end = nullptr;
-  const double v = std::strtod(text.c_str(), &end);
-  if (text.empty() || *end != '\0' || errno != 0 || !std::isfinite(v)) {
-    return InvalidArgumentError("--" + name + " must be a number, got '" + text + "'");
+StatusOr<ScaleOptions> ScaleFlags::Options() const {
+  ScaleOptions scale;
+  int sources = 0;
+  if (command_line_->Has("first-step-m")) {
+    SLAPSE_RETURN_IF_ERROR(CheckRange("first-step-m", first_step_m_, 1e-3, 1e3));
+    scale.source = ScaleOptions::Source::kFirstStep;
+    scale.first_step_m = first_step_m_;
+    ++sources;
   }
-  if (v < min || v > max) {
-    std::ostringstream os;
-    os << "--" << name << " must be in [" << min << ", " << max << "], got " << text;
-    return InvalidArgumentError(os.str());
+  if (command_line_->Has("speed-kmh")) {
+    SLAPSE_RETURN_IF_ERROR(CheckRange("speed-kmh", speed_kmh_, 0.1, 500));
+    scale.source = ScaleOptions::Source::kSpeed;
+    scale.speed_mps = speed_kmh_ / 3.6;
+    ++sources;
   }
-  return v;
+  if (command_line_->Has("camera-height-m")) {
+    SLAPSE_RETURN_IF_ERROR(CheckRange("camera-height-m", camera_height_m_, 0.05, 100));
+    scale.source = ScaleOptions::Source::kCameraHeight;
+    scale.camera_height_m = camera_height_m_;
+    ++sources;
+  }
+  if (sources > 1) return InvalidArgumentError("give at most one scale source");
+  return scale;
 }
 
 StatusOr<Intrinsics> IntrinsicsFor(const std::string& spec, const std::string& input, int width_px,

@@ -1,50 +1,62 @@
-// A small command-line parser for slapse's subcommands: `--name value`,
-// `--name=value`, boolean `--name`, positional arguments, and `--help`.
-// Every accessor validates its value; errors are one line a person can act on.
+// The slapse CLI's flag handling: CLI11 parses each subcommand's flags, which
+// are bound straight to the core option structs (so --help shows the structs'
+// defaults, never a retyped string). Positional arguments are collected and
+// counted by each command, range checks print the messages they always have,
+// and the scale-source flags are parsed in one place for `run` and `create`.
 #pragma once
 
-#include <map>
-#include <set>
+#include <cstdint>
 #include <string>
 #include <vector>
 
+#include <CLI/CLI.hpp>
+
 #include "core/common/camera.h"
 #include "core/common/status.h"
+#include "core/pipeline/pipeline.h"
 
 namespace slapse::cli {
 
-struct FlagSpec {
-  std::string name;  // without dashes
-  std::string meta;  // value placeholder, empty for a boolean switch
-  std::string help;  // one line
-  std::string default_value;
-};
-
-class Flags {
+// One subcommand's command line: `slapse <command> ...`.
+class CommandLine {
  public:
-  Flags(std::string command, std::string synopsis, std::vector<FlagSpec> specs)
-      : command_(std::move(command)), synopsis_(std::move(synopsis)), specs_(std::move(specs)) {}
+  // `synopsis` is shown first in --help; `positional_name` names the
+  // positional arguments there (e.g. "INPUT").
+  CommandLine(const std::string& command, const std::string& synopsis,
+              const std::string& positional_name = "ARGS");
 
-  // Parses argv after the subcommand name. `--help` sets help_requested().
-  Status Parse(int argc, char** argv);
-  bool help_requested() const { return help_; }
-  std::string Usage() const;
+  CLI::App& app() { return app_; }
+
+  // Parses argv after the subcommand name. Returns -1 to go on; 0 after
+  // printing --help on stdout; 2 after printing a usage error on stderr.
+  int Parse(int argc, char** argv);
 
   const std::vector<std::string>& positional() const { return positional_; }
-  bool Has(const std::string& name) const { return values_.count(name) > 0; }
-  std::string GetString(const std::string& name) const;
-  StatusOr<int64_t> GetInt(const std::string& name, int64_t min, int64_t max) const;
-  StatusOr<double> GetDouble(const std::string& name, double min, double max) const;
-  bool GetBool(const std::string& name) const { return Has(name); }
+  // Whether --`name` was given on the command line.
+  bool Has(const std::string& name) const;
+  const char* command() const { return command_.c_str(); }
 
  private:
-  const FlagSpec* Find(const std::string& name) const;
-
-  std::string command_, synopsis_;
-  std::vector<FlagSpec> specs_;
-  std::map<std::string, std::string> values_;
+  std::string command_;
+  CLI::App app_;
   std::vector<std::string> positional_;
-  bool help_ = false;
+};
+
+// "--name must be in [min, max], got v" unless min <= v <= max (NaN fails).
+Status CheckRange(const std::string& name, double v, double min, double max);
+Status CheckRange(const std::string& name, int64_t v, int64_t min, int64_t max);
+
+// The metric-scale flags shared by `run` and `create`: --first-step-m,
+// --speed-kmh, --camera-height-m (at most one).
+class ScaleFlags {
+ public:
+  void AddTo(CommandLine* command_line);
+  // The ScaleOptions they ask for (default: up to scale), or the usage error.
+  StatusOr<ScaleOptions> Options() const;
+
+ private:
+  CommandLine* command_line_ = nullptr;
+  double first_step_m_ = 0.0, speed_kmh_ = 0.0, camera_height_m_ = 0.0;
 };
 
 // Intrinsics for a width x height stream from an --intrinsics spec

@@ -102,7 +102,7 @@ StatusOr<std::unique_ptr<VideoEncoder>> VideoEncoder::Open(const std::string& pa
     av_dict_set_int(&opts, "crf", o.quality, 0);
     // Fixed GOP: no adaptive B placement and no scene cuts; by default no
     // B-pyramid and one reference, so every B frame refers to its two
-    // neighbouring anchors (ALGORITHM.md §7).
+    // neighbouring anchors (the reading of MVs in docs/METHOD.md, "MV merging").
     const std::string params =
         std::string("scenecut=0:b-adapt=0:b-pyramid=") + (o.h264_b_pyramid ? "normal" : "none") +
         ":ref=" + std::to_string(std::max(1, o.h264_refs)) +

@@ -2,51 +2,35 @@
 
 #include <cmath>
 #include <cstdlib>
-#include <fstream>
-#include <sstream>
+#include <filesystem>
+
+#include "core/common/json_io.h"
 
 namespace slapse {
-namespace {
-
-// The number after "key": in a flat JSON text, or NaN.
-double JsonNumber(const std::string& text, const std::string& key) {
-  const size_t k = text.find("\"" + key + "\"");
-  if (k == std::string::npos) return NAN;
-  const size_t colon = text.find(':', k);
-  if (colon == std::string::npos) return NAN;
-  const char* begin = text.c_str() + colon + 1;
-  char* end = nullptr;
-  const double v = std::strtod(begin, &end);
-  return end == begin ? NAN : v;
-}
-
-Status Validate(const Intrinsics& k, const std::string& what) {
-  if (!(k.fx_px > 0 && k.fy_px > 0 && std::isfinite(k.cx_px) && std::isfinite(k.cy_px))) {
-    return InvalidArgumentError(what +
-                                ": focal lengths must be positive and the principal "
-                                "point finite");
-  }
-  return Status::Ok();
-}
-
-}  // namespace
 
 StatusOr<Intrinsics> ReadIntrinsicsJson(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) return NotFoundError("cannot read intrinsics file '" + path + "'");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  const std::string text = ss.str();
+  if (!std::filesystem::exists(path)) return NotFoundError("cannot read intrinsics file '" + path + "'");
+  auto doc = ReadJsonFile(path);
+  if (!doc.ok()) return InvalidArgumentError("intrinsics file: " + doc.status().message());
+  const std::string where = "intrinsics file '" + path + "'";
   Intrinsics k;
-  k.fx_px = JsonNumber(text, "fx_px");
-  k.fy_px = JsonNumber(text, "fy_px");
-  k.cx_px = JsonNumber(text, "cx_px");
-  k.cy_px = JsonNumber(text, "cy_px");
-  const double w = JsonNumber(text, "width_px"), h = JsonNumber(text, "height_px");
-  k.width_px = std::isfinite(w) ? static_cast<int>(w) : 0;
-  k.height_px = std::isfinite(h) ? static_cast<int>(h) : 0;
-  SLAPSE_RETURN_IF_ERROR(
-      Validate(k, "intrinsics file '" + path + "' (keys fx_px fy_px cx_px cy_px)"));
+  for (const auto& [key, value] : {std::pair<const char*, double*>{"fx_px", &k.fx_px},
+                                   {"fy_px", &k.fy_px},
+                                   {"cx_px", &k.cx_px},
+                                   {"cy_px", &k.cy_px}}) {
+    if (Status s = GetNumber(*doc, key, where, value); !s.ok()) {
+      return InvalidArgumentError(s.message());
+    }
+  }
+  // Optional: the size the intrinsics are for (0 = any stream).
+  for (const auto& [key, value] : {std::pair<const char*, int*>{"width_px", &k.width_px},
+                                   {"height_px", &k.height_px}}) {
+    if (!doc->contains(key)) continue;
+    if (Status s = GetInt(*doc, key, where, value); !s.ok()) {
+      return InvalidArgumentError(s.message());
+    }
+  }
+  SLAPSE_RETURN_IF_ERROR(ValidateIntrinsics(k, where));
   return k;
 }
 
@@ -76,7 +60,7 @@ StatusOr<Intrinsics> ParseIntrinsicsSpec(const std::string& spec, int width_px, 
       p = end + 1;
     }
     k.fx_px = v[0], k.fy_px = v[1], k.cx_px = v[2], k.cy_px = v[3];
-    SLAPSE_RETURN_IF_ERROR(Validate(k, "intrinsics '" + spec + "'"));
+    SLAPSE_RETURN_IF_ERROR(ValidateIntrinsics(k, "intrinsics '" + spec + "'"));
   }
   if (k.width_px != 0 && (k.width_px != width_px || k.height_px != height_px)) {
     return InvalidArgumentError("intrinsics are for " + std::to_string(k.width_px) + "x" +

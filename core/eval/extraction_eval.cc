@@ -3,10 +3,12 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <fstream>
 #include <map>
 #include <optional>
 
+#include "core/common/angles.h"
+#include "core/common/json_io.h"
+#include "core/common/mb_grid.h"
 #include "core/common/so3.h"
 #include "core/common/timing.h"
 #include "core/estimators/epipolar_plane.h"
@@ -16,23 +18,23 @@
 namespace slapse {
 namespace {
 
-constexpr double kRadToDeg = 180.0 / M_PI;
+// Degrees per radian. Multiplying by it is not RadToDeg's x * 180 / pi
+// bit for bit, and the per-plane CSV has always used this product, so it stays
+// (its value is angles.h's: RadToDeg(1) is exactly 180 / pi).
+const double kRadToDeg = RadToDeg(1.0);
 
-// The angle between two nonzero vectors, degrees.
+// The angle between two nonzero vectors, degrees (AngleBetweenDeg but for the
+// product order above).
 double AngleDeg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
   return kRadToDeg * std::acos(std::clamp(a.normalized().dot(b.normalized()), -1.0, 1.0));
 }
 
 // The video of a drive directory: meta.json names it; default drive.ts.
 std::string VideoOf(const std::string& dir) {
-  std::ifstream meta(dir + "/meta.json");
-  std::string line;
-  while (std::getline(meta, line)) {
-    const size_t k = line.find("\"video\"");
-    if (k == std::string::npos) continue;
-    const size_t a = line.find('"', line.find(':', k) + 1), b = line.find('"', a + 1);
-    if (a != std::string::npos && b != std::string::npos)
-      return dir + "/" + line.substr(a + 1, b - a - 1);
+  std::string video;
+  if (auto meta = ReadJsonFile(dir + "/meta.json");
+      meta.ok() && GetString(*meta, "video", dir + "/meta.json", &video).ok()) {
+    return dir + "/" + video;
   }
   return dir + "/drive.ts";
 }
@@ -79,8 +81,7 @@ void BackwardFit(const AnchorPair& pair, const InfinityResult& inf, const Anchor
   int n = 0, fit = 0, fit15 = 0;
   for (int i : plane.correspondence_indices) {
     const Eigen::Vector2d& x = pair.correspondences[i].x_earlier_px;
-    const int col = static_cast<int>(std::floor((x.x() + 0.5) / 16)),
-              row = static_cast<int>(std::floor((x.y() + 0.5) / 16));
+    const int col = MbCellOf(x.x()), row = MbCellOf(x.y());
     if (col < 0 || row < 0 || col >= prev.mb_cols || row >= prev.mb_rows) continue;
     const int j = at_cell[row * prev.mb_cols + col];
     if (j < 0) continue;

@@ -1,5 +1,7 @@
 #include "core/eval/plane_map_eval.h"
 
+#include "core/common/angles.h"
+
 #include <algorithm>
 #include <cmath>
 #include <map>
@@ -42,7 +44,7 @@ StatusOr<PlaneMapErrors> EvaluatePlaneMap(const std::vector<PlaneEstimate>& esti
     const double d_est = metres_per_unit / e.pi_cam.norm();
     const double cos_angle = std::clamp(e.pi_cam.normalized().dot(n_true), -1.0, 1.0);
     acc.sum_d += std::abs(d_est - d_true);
-    acc.sum_n += std::acos(cos_angle) * 180.0 / M_PI;
+    acc.sum_n += RadToDeg(std::acos(cos_angle));
     ++acc.n;
   }
   PlaneMapErrors out;

@@ -4,6 +4,7 @@
 
 #include <Eigen/SVD>
 
+#include "core/common/angles.h"
 #include "core/common/so3.h"
 
 namespace slapse {
@@ -89,7 +90,7 @@ StatusOr<TrajectoryErrors> EvaluateTrajectory(const std::vector<TimedPose>& esti
     const Rigid3d de = est[k - 1]->world_from_cam.Inverse() * est[k]->world_from_cam;
     const Rigid3d dg = gt[k - 1]->world_from_cam.Inverse() * gt[k]->world_from_cam;
     sq_t += (sim->scale * de.translation - dg.translation).squaredNorm();
-    const double ang = LogSO3(de.R().transpose() * dg.R()).norm() * 180.0 / M_PI;
+    const double ang = RadToDeg(LogSO3(de.R().transpose() * dg.R()).norm());
     sq_r += ang * ang;
   }
   e.rpe_trans_rmse_m = std::sqrt(sq_t / (est.size() - 1));

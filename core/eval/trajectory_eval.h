@@ -1,5 +1,5 @@
 // Accuracy of an estimated trajectory and plane map against ground truth
-// (paper Sec. VII, ALGORITHM.md §6), plus the standard ATE/RPE.
+// (paper Sec. VII; how they are reported: docs/TRAJECTORY.md), plus the standard ATE/RPE.
 #pragma once
 
 #include <map>

@@ -59,7 +59,8 @@ struct StreamInfo {
   int width_px = 0, height_px = 0;
   double fps = 0.0;            // nominal frame rate, 0 if unknown
   int mv_precision_denom = 2;  // 2 = half-pel, 4 = quarter-pel
-  // Standard deviation of a correct MV's error (ALGORITHM.md §1): 0.25 px for
+  // Standard deviation of a correct MV's error (half the MV precision; docs/METHOD.md,
+  // "MV reader"): 0.25 px for
   // half-pel codecs, 0.125 px for quarter-pel ones.
   double mv_sigma_px() const { return mv_precision_denom >= 4 ? 0.125 : 0.25; }
   int max_consecutive_b = 0;  // n_B seen so far: B frames between two anchors
@@ -68,7 +69,7 @@ struct StreamInfo {
   // the reader then yields B frames without vectors rather than garbage.
   bool b_frame_mvs = true;
   // Reference structures that break the "nearest anchor" reading of MVs
-  // (ALGORITHM.md §7). FFmpeg does not export which reference a vector uses,
+  // (docs/METHOD.md, "MV merging"). FFmpeg does not export which reference a vector uses,
   // so these are detected and reported, never guessed:
   //  - b_pyramid: some B frame is decoded before a B frame shown earlier
   //    between the same anchors, i.e. B frames serve as references; their

@@ -116,7 +116,6 @@ class Pipeline {
   // Later frames still need larger indices and timestamps.
   void Break();
 
-  using TrajectoryPoint = TimedPose;  // the old name; callers move to TimedPose
   const std::vector<TimedPose>& trajectory() const { return trajectory_; }
   // Every plane the filter ever held, by track id.
   const std::map<int, MapPlane>& plane_map() const { return plane_map_; }

@@ -3,9 +3,11 @@
 #include <cstdio>
 #include <fstream>
 
+#include "core/common/json_io.h"
+
 namespace slapse {
 
-void WriteTrajectoryTum(const std::vector<Pipeline::TrajectoryPoint>& trajectory,
+void WriteTrajectoryTum(const std::vector<TimedPose>& trajectory,
                         std::ostream& out) {
   out << "# timestamp_s tx ty tz qx qy qz qw  (world_from_cam; world = first tracked camera, "
          "x right, y down, z forward)\n";
@@ -19,7 +21,7 @@ void WriteTrajectoryTum(const std::vector<Pipeline::TrajectoryPoint>& trajectory
   }
 }
 
-void WriteTrajectoryKitti(const std::vector<Pipeline::TrajectoryPoint>& trajectory,
+void WriteTrajectoryKitti(const std::vector<TimedPose>& trajectory,
                           std::ostream& out) {
   char line[400];
   for (const auto& p : trajectory) {
@@ -33,50 +35,49 @@ void WriteTrajectoryKitti(const std::vector<Pipeline::TrajectoryPoint>& trajecto
   }
 }
 
+namespace {
+
+// planes.json's numbers have always had fixed decimals by member: these keep
+// its bytes (nlohmann alone would print shortest round-trip forms).
+std::string ResultNumber(const std::string& key, size_t /*index*/, double v) {
+  if (key == "t" || key == "q") return FormatDouble("%.9f", v);
+  if (key == "first_seen_s" || key == "last_seen_s") return FormatDouble("%.3f", v);
+  return FormatDouble("%.6f", v);  // timestamp_s, normal_world, distance
+}
+
+}  // namespace
+
 void WriteResultJson(const std::map<int, MapPlane>& planes, bool metric,
                      const ResultJsonOptions& options, std::ostream& out) {
-  out << "{\n  \"frame\": \"world = first tracked camera (x right, y down, z forward); n . X = "
-         "d\",\n"
-      << "  \"unit\": \"" << (metric ? "m" : "first step") << "\",\n";
-  char buf[400];
+  Json doc;
+  doc["frame"] = "world = first tracked camera (x right, y down, z forward); n . X = d";
+  doc["unit"] = metric ? "m" : "first step";
   if (options.trajectory != nullptr) {
-    out << "  \"trajectory\": [";
-    bool first = true;
+    Json& trajectory = doc["trajectory"] = Json::array();
     for (const auto& p : *options.trajectory) {
       const Eigen::Quaterniond& q = p.world_from_cam.rotation;
       const Eigen::Vector3d& t = p.world_from_cam.translation;
-      std::snprintf(buf, sizeof(buf),
-                    "%s    {\"frame_index\": %lld, \"timestamp_s\": %.6f, \"t\": [%.9f, %.9f, "
-                    "%.9f], \"q\": [%.9f, %.9f, %.9f, %.9f]}",
-                    first ? "\n" : ",\n", static_cast<long long>(p.index), p.timestamp_s, t.x(),
-                    t.y(), t.z(), q.x(), q.y(), q.z(), q.w());
-      out << buf;
-      first = false;
+      Json pose;
+      pose["frame_index"] = static_cast<long long>(p.index);
+      pose["timestamp_s"] = p.timestamp_s;
+      pose["t"] = {t.x(), t.y(), t.z()};
+      pose["q"] = {q.x(), q.y(), q.z(), q.w()};
+      trajectory.push_back(std::move(pose));
     }
-    out << "\n  ],\n";
   }
-  out << "  \"planes\": [";
-  bool first = true;
+  Json& list = doc["planes"] = Json::array();
   for (const auto& [id, p] : planes) {
-    out << (first ? "\n" : ",\n");
-    first = false;
-    std::snprintf(
-        buf, sizeof(buf),
-        "    {\"track_id\": %d, \"normal_world\": [%.6f, %.6f, %.6f], \"distance\": %.6f, "
-        "\"first_seen_s\": %.3f, \"last_seen_s\": %.3f, \"updates\": %d",
-        id, p.normal_world.x(), p.normal_world.y(), p.normal_world.z(), p.distance_m,
-        p.first_seen_s, p.last_seen_s, p.observations);
-    out << buf;
-    if (options.seen_at_frames) {
-      out << ", \"seen_at_frames\": [";
-      for (size_t i = 0; i < p.seen_indices.size(); ++i) {
-        out << (i ? ", " : "") << p.seen_indices[i];
-      }
-      out << "]";
-    }
-    out << "}";
+    Json plane;
+    plane["track_id"] = id;
+    plane["normal_world"] = {p.normal_world.x(), p.normal_world.y(), p.normal_world.z()};
+    plane["distance"] = p.distance_m;
+    plane["first_seen_s"] = p.first_seen_s;
+    plane["last_seen_s"] = p.last_seen_s;
+    plane["updates"] = p.observations;
+    if (options.seen_at_frames) plane["seen_at_frames"] = p.seen_indices;
+    list.push_back(std::move(plane));
   }
-  out << "\n  ]\n}\n";
+  out << DumpJson(doc, ResultNumber);
 }
 
 Status WriteResultFile(const std::string& path, const std::function<void(std::ostream&)>& write) {

@@ -15,11 +15,11 @@
 namespace slapse {
 
 // TUM: a header comment, then "timestamp_s tx ty tz qx qy qz qw" per pose.
-void WriteTrajectoryTum(const std::vector<Pipeline::TrajectoryPoint>& trajectory,
+void WriteTrajectoryTum(const std::vector<TimedPose>& trajectory,
                         std::ostream& out);
 
 // KITTI: the 3x4 matrix [R | t] of each pose, row-major, one pose per line.
-void WriteTrajectoryKitti(const std::vector<Pipeline::TrajectoryPoint>& trajectory,
+void WriteTrajectoryKitti(const std::vector<TimedPose>& trajectory,
                           std::ostream& out);
 
 struct ResultJsonOptions {
@@ -28,7 +28,7 @@ struct ResultJsonOptions {
   bool seen_at_frames = true;
   // When set, a "trajectory" array (before "planes") with one object per pose:
   // frame_index, timestamp_s, t = [tx, ty, tz], q = [qx, qy, qz, qw].
-  const std::vector<Pipeline::TrajectoryPoint>* trajectory = nullptr;
+  const std::vector<TimedPose>* trajectory = nullptr;
 };
 
 // The plane map as JSON (run's planes.json): frame, unit, planes by track id.

@@ -4,13 +4,17 @@
 #include <cmath>
 #include <string>
 
+#include "core/common/angles.h"
 #include "core/sim/random.h"
 
 namespace slapse {
 
 namespace {
 
-constexpr double kDeg = M_PI / 180.0;
+// Radians per degree (angles.h: DegToRad(1) is exactly pi / 180). The path
+// and scene multiply by it, which is not DegToRad's x * pi / 180 bit for bit:
+// kept so that simulated drives stay identical.
+const double kDeg = DegToRad(1.0);
 
 // A sum of sinusoids: sum_k a_k sin(w_k t + phi_k).
 struct Sinusoids {

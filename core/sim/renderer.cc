@@ -5,11 +5,13 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <optional>
 #include <string>
 
 #include <Eigen/LU>
 #include <opencv2/imgproc.hpp>
 
+#include "core/common/mb_grid.h"
 #include "core/common/timing.h"
 #include "core/sim/texture.h"
 
@@ -287,98 +289,145 @@ void Renderer::MakeTiles(const std::vector<std::pair<uint64_t, int>>& requests) 
   stats_.tiles_made += static_cast<int64_t>(jobs.size());
 }
 
-Status Renderer::Render(const Rigid3d& world_from_cam, RenderedFrame* frame) {
-  if (frame == nullptr) return InvalidArgumentError("Render: null frame");
-  const auto t_start = Clock::now();
-  const int ss = options_.supersampling;
-  const int W = intrinsics_.width_px, H = intrinsics_.height_px;
-  const int ws = W * ss, hs = H * ss;
-  // Supersampled intrinsics: sample i is centred at output x = (i + 0.5) / ss - 0.5.
-  const double fx = intrinsics_.fx_px * ss, fy = intrinsics_.fy_px * ss;
-  const double cx = intrinsics_.cx_px * ss + 0.5 * (ss - 1);
-  const double cy = intrinsics_.cy_px * ss + 0.5 * (ss - 1);
+// The supersampled camera of one frame: sample i is centred at output
+// x = (i + 0.5) / ss - 0.5, so the sample intrinsics are K scaled by ss with
+// the principal point moved by 0.5 (ss - 1).
+struct Renderer::View {
+  int ss = 1, W = 0, H = 0, ws = 0, hs = 0;
+  double fx = 0, fy = 0, cx = 0, cy = 0;
   Eigen::Matrix3d k_inv;
-  k_inv << 1.0 / fx, 0, -cx / fx, 0, 1.0 / fy, -cy / fy, 0, 0, 1;
-  const Rigid3d cam_from_world = world_from_cam.Inverse();
-  const Eigen::Matrix3d R = cam_from_world.R();
-  const Eigen::Vector3d t = cam_from_world.translation;
-  const double near = options_.near_m;
-
+  Eigen::Matrix3d R;  // cam_from_world
+  Eigen::Vector3d t;
+  Eigen::Matrix3d r_wc;  // world_from_cam
+  float lod_pixel = 0;   // log2 ss: an output pixel's footprint in samples
   // Frustum side planes through the camera centre (inside: n . X >= 0).
-  Eigen::Vector3d side[4] = {
-      {fx, 0, cx + 0.5}, {-fx, 0, ws - 0.5 - cx}, {0, fy, cy + 0.5}, {0, -fy, hs - 0.5 - cy}};
-  for (auto& n : side) n.normalize();
+  Eigen::Vector3d side[4];
+};
 
-  std::vector<Visible> visible;
-  std::unordered_map<uint64_t, int> requests;
-  for (const Piece& piece : pieces_) {
-    const Eigen::Vector3d c = R * piece.centre + t;
-    if (c.z() + piece.radius < near) continue;
-    bool outside = false;
-    for (const auto& n : side) outside = outside || n.dot(c) < -piece.radius;
-    if (outside) continue;
-    std::vector<Eigen::Vector3d> cam;
-    cam.reserve(piece.poly_world.size());
-    for (const auto& p : piece.poly_world) cam.push_back(R * p + t);
-    cam = ClipPolygon(cam, [&](const Eigen::Vector3d& p) { return p.z() - near; });
-    if (cam.size() < 3) continue;
-    std::vector<Eigen::Vector2d> px;
-    px.reserve(cam.size());
-    for (const auto& p : cam) px.emplace_back(fx * p.x() / p.z() + cx, fy * p.y() / p.z() + cy);
-    px = ClipPolygon(px, [&](const Eigen::Vector2d& p) { return p.x() + 0.5; });
-    px = ClipPolygon(px, [&](const Eigen::Vector2d& p) { return ws - 0.5 - p.x(); });
-    px = ClipPolygon(px, [&](const Eigen::Vector2d& p) { return p.y() + 0.5; });
-    px = ClipPolygon(px, [&](const Eigen::Vector2d& p) { return hs - 0.5 - p.y(); });
-    if (px.size() < 3) continue;
-    // Camera point of tile texel (j, k): G (j, k, 1); a pixel p sees
-    // (j, k, 1) / z = G^-1 K^-1 p, so the third row of Q is the inverse depth.
-    Eigen::Matrix3d g;
-    g.col(0) = R * piece.du;
-    g.col(1) = R * piece.dv;
-    g.col(2) = R * piece.origin + t;
-    const double det_g = g.determinant();
-    if (!std::isfinite(det_g) || std::abs(det_g) < 1e-18) continue;  // edge-on
-    const Eigen::Matrix3d q = g.inverse() * k_inv;
-    Visible vis;
-    vis.piece = &piece;
-    for (int r = 0; r < 3; ++r) {
-      for (int col = 0; col < 3; ++col) vis.q[3 * r + col] = q(r, col);
-    }
-    const double det_q = q.determinant();
-    vis.lod_c0 = static_cast<float>(0.5 * std::log2(std::abs(det_q)));
-    // Finest level needed: the largest inverse depth is at a vertex (affine).
-    double max_iz = 0.0;
-    double ymin = 1e300, ymax = -1e300;
-    for (const auto& p : px) {
-      max_iz = std::max(max_iz, q(2, 0) * p.x() + q(2, 1) * p.y() + q(2, 2));
-      ymin = std::min(ymin, p.y());
-      ymax = std::max(ymax, p.y());
-    }
-    if (!(max_iz > 0)) continue;
-    const double min_lod = vis.lod_c0 + std::log2(static_cast<double>(options_.supersampling)) -
-                           1.5 * std::log2(max_iz);
-    vis.need_level = std::clamp(static_cast<int>(std::floor(min_lod)), 0, kMaxLevels - 1);
-    vis.y0 = std::max(0, static_cast<int>(std::ceil(ymin)));
-    vis.y1 = std::min(hs - 1, static_cast<int>(std::floor(ymax)));
-    if (vis.y1 < vis.y0) continue;
-    vis.poly = std::move(px);
-    vis.max_iz = max_iz;
-    auto it = requests.find(piece.key);
-    if (it == requests.end()) {
-      requests.emplace(piece.key, vis.need_level);
-    } else {
-      it->second = std::min(it->second, vis.need_level);
-    }
-    visible.push_back(std::move(vis));
+// Per-thread scratch of the rasteriser: one output row of `ss` sample rows.
+struct Renderer::RowScratch {
+  int span0[4], span1[4];  // covered samples of each sample row
+  int px0 = 0, px1 = -1;   // output pixels any of them touch
+  int hit_x[16], hit_y[16];
+  float hit_z[16];
+  std::vector<float> iz_rows[4];
+  std::vector<uint8_t> won_rows[4];
+};
+
+Renderer::View Renderer::MakeView(const Rigid3d& world_from_cam) const {
+  View v;
+  v.ss = options_.supersampling;
+  v.W = intrinsics_.width_px;
+  v.H = intrinsics_.height_px;
+  v.ws = v.W * v.ss;
+  v.hs = v.H * v.ss;
+  v.fx = intrinsics_.fx_px * v.ss;
+  v.fy = intrinsics_.fy_px * v.ss;
+  v.cx = intrinsics_.cx_px * v.ss + 0.5 * (v.ss - 1);
+  v.cy = intrinsics_.cy_px * v.ss + 0.5 * (v.ss - 1);
+  v.k_inv << 1.0 / v.fx, 0, -v.cx / v.fx, 0, 1.0 / v.fy, -v.cy / v.fy, 0, 0, 1;
+  const Rigid3d cam_from_world = world_from_cam.Inverse();
+  v.R = cam_from_world.R();
+  v.t = cam_from_world.translation;
+  v.r_wc = world_from_cam.R();
+  v.lod_pixel = static_cast<float>(std::log2(static_cast<double>(v.ss)));
+  v.side[0] = {v.fx, 0, v.cx + 0.5};
+  v.side[1] = {-v.fx, 0, v.ws - 0.5 - v.cx};
+  v.side[2] = {0, v.fy, v.cy + 0.5};
+  v.side[3] = {0, -v.fy, v.hs - 0.5 - v.cy};
+  for (auto& n : v.side) n.normalize();
+  return v;
+}
+
+// A piece's polygon in supersampled pixels, clipped to the near plane and the
+// image; fewer than 3 vertices when it is not visible.
+std::vector<Eigen::Vector2d> Renderer::ClipToImage(const Piece& piece, const View& v) const {
+  const double near = options_.near_m;
+  const Eigen::Vector3d c = v.R * piece.centre + v.t;
+  if (c.z() + piece.radius < near) return {};
+  bool outside = false;
+  for (const auto& n : v.side) outside = outside || n.dot(c) < -piece.radius;
+  if (outside) return {};
+  std::vector<Eigen::Vector3d> cam;
+  cam.reserve(piece.poly_world.size());
+  for (const auto& p : piece.poly_world) cam.push_back(v.R * p + v.t);
+  cam = ClipPolygon(cam, [&](const Eigen::Vector3d& p) { return p.z() - near; });
+  if (cam.size() < 3) return {};
+  std::vector<Eigen::Vector2d> px;
+  px.reserve(cam.size());
+  for (const auto& p : cam) {
+    px.emplace_back(v.fx * p.x() / p.z() + v.cx, v.fy * p.y() / p.z() + v.cy);
   }
+  const double ws = v.ws, hs = v.hs;
+  px = ClipPolygon(px, [&](const Eigen::Vector2d& p) { return p.x() + 0.5; });
+  px = ClipPolygon(px, [&](const Eigen::Vector2d& p) { return ws - 0.5 - p.x(); });
+  px = ClipPolygon(px, [&](const Eigen::Vector2d& p) { return p.y() + 0.5; });
+  px = ClipPolygon(px, [&](const Eigen::Vector2d& p) { return hs - 0.5 - p.y(); });
+  return px;
+}
 
+std::optional<Renderer::Visible> Renderer::ProjectPiece(const Piece& piece, const View& v) const {
+  std::vector<Eigen::Vector2d> px = ClipToImage(piece, v);
+  if (px.size() < 3) return std::nullopt;
+  // Camera point of tile texel (j, k): G (j, k, 1); a pixel p sees
+  // (j, k, 1) / z = G^-1 K^-1 p, so the third row of Q is the inverse depth.
+  Eigen::Matrix3d g;
+  g.col(0) = v.R * piece.du;
+  g.col(1) = v.R * piece.dv;
+  g.col(2) = v.R * piece.origin + v.t;
+  const double det_g = g.determinant();
+  if (!std::isfinite(det_g) || std::abs(det_g) < 1e-18) return std::nullopt;  // edge-on
+  const Eigen::Matrix3d q = g.inverse() * v.k_inv;
+  Visible vis;
+  vis.piece = &piece;
+  for (int r = 0; r < 3; ++r) {
+    for (int col = 0; col < 3; ++col) vis.q[3 * r + col] = q(r, col);
+  }
+  const double det_q = q.determinant();
+  vis.lod_c0 = static_cast<float>(0.5 * std::log2(std::abs(det_q)));
+  // Finest level needed: the largest inverse depth is at a vertex (affine).
+  double max_iz = 0.0;
+  double ymin = 1e300, ymax = -1e300;
+  for (const auto& p : px) {
+    max_iz = std::max(max_iz, q(2, 0) * p.x() + q(2, 1) * p.y() + q(2, 2));
+    ymin = std::min(ymin, p.y());
+    ymax = std::max(ymax, p.y());
+  }
+  if (!(max_iz > 0)) return std::nullopt;
+  const double min_lod = vis.lod_c0 + std::log2(static_cast<double>(options_.supersampling)) -
+                         1.5 * std::log2(max_iz);
+  vis.need_level = std::clamp(static_cast<int>(std::floor(min_lod)), 0, kMaxLevels - 1);
+  vis.y0 = std::max(0, static_cast<int>(std::ceil(ymin)));
+  vis.y1 = std::min(v.hs - 1, static_cast<int>(std::floor(ymax)));
+  if (vis.y1 < vis.y0) return std::nullopt;
+  vis.poly = std::move(px);
+  vis.max_iz = max_iz;
+  return vis;
+}
+
+std::vector<Renderer::Visible> Renderer::FindVisible(
+    const View& v, std::unordered_map<uint64_t, int>* requests) const {
+  std::vector<Visible> visible;
+  for (const Piece& piece : pieces_) {
+    std::optional<Visible> vis = ProjectPiece(piece, v);
+    if (!vis.has_value()) continue;
+    auto it = requests->find(piece.key);
+    if (it == requests->end()) {
+      requests->emplace(piece.key, vis->need_level);
+    } else {
+      it->second = std::min(it->second, vis->need_level);
+    }
+    visible.push_back(std::move(*vis));
+  }
   // Front to back (nearest point first), so hidden samples fail the depth
   // test before texturing. The order is deterministic (ties by piece order).
   std::stable_sort(visible.begin(), visible.end(),
                    [](const Visible& a, const Visible& b) { return a.max_iz > b.max_iz; });
+  return visible;
+}
 
-  // Textures: make what is missing (in parallel), then bind tiles.
-  const auto t_tex = Clock::now();
+// Makes the tiles (and levels) the visible pieces need that the cache lacks, in parallel.
+void Renderer::MakeMissingTiles(const std::unordered_map<uint64_t, int>& requests) {
   std::vector<std::pair<uint64_t, int>> todo;
   for (const auto& [key, level] : requests) {
     auto it = tiles_.find(key);
@@ -388,180 +437,179 @@ Status Renderer::Render(const Rigid3d& world_from_cam, RenderedFrame* frame) {
   }
   std::sort(todo.begin(), todo.end());
   MakeTiles(todo);
-  const auto t_tex_done = Clock::now();
-  stats_.texture_s += SecondsBetween(t_tex, t_tex_done);
-  ++stats_.frames;
-  for (Visible& vis : visible) {
-    Tile* tile = tiles_.at(vis.piece->key).get();
-    tile->last_used = stats_.frames;
-    vis.tile = tile;
-  }
+}
 
-  // Rasterise in bands of output rows (one writer per pixel; the same piece
-  // order everywhere). Coverage and depth are resolved per sample; the texture
-  // is sampled once per output pixel and piece, at the centroid of the
-  // samples it wins (multisample anti-aliasing), with the footprint of an
-  // output pixel.
-  color_.create(hs, ws, CV_8UC3);
-  inv_depth_.create(hs, ws);
-  sample_labels_.create(hs, ws);
+// Covered samples of each sample row of output row `row`: sample centres
+// inside the polygon (scratch->span0/span1, and the output pixels px0..px1).
+void Renderer::CoverRow(const Visible& vis, const View& v, int row, RowScratch* s) {
+  const size_t nv = vis.poly.size();
+  s->px0 = v.ws;
+  s->px1 = -1;
+  for (int r = 0; r < v.ss; ++r) {
+    const int y = row * v.ss + r;
+    s->span0[r] = 0;
+    s->span1[r] = -1;
+    if (y < vis.y0 || y > vis.y1) continue;
+    double xl = 1e300, xr = -1e300;
+    for (size_t e = 0; e < nv; ++e) {
+      const Eigen::Vector2d& a = vis.poly[e];
+      const Eigen::Vector2d& b = vis.poly[(e + 1) % nv];
+      if ((a.y() <= y && b.y() >= y) || (b.y() <= y && a.y() >= y)) {
+        if (a.y() == b.y()) {
+          xl = std::min({xl, a.x(), b.x()});
+          xr = std::max({xr, a.x(), b.x()});
+        } else {
+          const double x = a.x() + (y - a.y()) * (b.x() - a.x()) / (b.y() - a.y());
+          xl = std::min(xl, x);
+          xr = std::max(xr, x);
+        }
+      }
+    }
+    s->span0[r] = std::max(0, static_cast<int>(std::ceil(xl - 1e-7)));
+    s->span1[r] = std::min(v.ws - 1, static_cast<int>(std::floor(xr + 1e-7)));
+    if (s->span0[r] <= s->span1[r]) {
+      s->px0 = std::min(s->px0, s->span0[r] / v.ss);
+      s->px1 = std::max(s->px1, s->span1[r] / v.ss);
+    }
+  }
+}
+
+// The texture of `tile` at tile-image texel (j, k) with level of detail
+// `lod`, BGR + 0.5 (the conversion to 8 bits truncates).
+void Renderer::SampleTile(const Tile& tile, float j, float k, float lod, float c[3]) {
+  lod = std::max(lod, static_cast<float>(tile.finest));
+  int l0 = static_cast<int>(lod);
+  // Blend two levels only around the middle between them
+  // ("brilinear"): half the pixels need a single lookup.
+  float f = std::min(std::max(2.0f * (lod - l0) - 0.5f, 0.0f), 1.0f);
+  if (l0 >= tile.coarsest) {
+    l0 = tile.coarsest;
+    f = 0.0f;
+  }
+  c[0] = c[1] = c[2] = 0.5f;
+  const float s0 = kLevelScale[l0];
+  if (f < 1.0f) BilinearAdd(tile.levels[l0], j * s0, k * s0, 1.0f - f, c);
+  if (f > 0.0f) BilinearAdd(tile.levels[l0 + 1], j * s0 * 0.5f, k * s0 * 0.5f, f, c);
+}
+
+void Renderer::DrawRow(const Visible& vis, const View& v, int row, RowScratch* s) {
+  CoverRow(vis, v, row, s);
+  const double* q = vis.q;
+  const int ss = v.ss;
+  // Depth test of each sample row's span in one tight loop.
+  for (int r = 0; r < ss; ++r) {
+    if (s->span0[r] > s->span1[r]) continue;
+    const int y = row * ss + r;
+    const float* zrow = inv_depth_.ptr<float>(y);
+    const double wz = q[7] * y + q[8];
+    float* izr = s->iz_rows[r].data();
+    uint8_t* wr = s->won_rows[r].data();
+    for (int x = s->span0[r]; x <= s->span1[r]; ++x) {
+      const float izf = static_cast<float>(q[6] * x + wz);
+      izr[x] = izf;
+      wr[x] = izf > zrow[x];
+    }
+  }
+  const Tile& tile = *vis.tile;
+  for (int px = s->px0; px <= s->px1; ++px) {
+    int n = 0;
+    double sx = 0.0, sy = 0.0;
+    for (int r = 0; r < ss; ++r) {
+      const int y = row * ss + r;
+      const int xa = std::max(s->span0[r], px * ss), xb = std::min(s->span1[r], px * ss + ss - 1);
+      for (int x = xa; x <= xb; ++x) {
+        if (!s->won_rows[r][x]) continue;
+        s->hit_x[n] = x;
+        s->hit_y[n] = y;
+        s->hit_z[n] = s->iz_rows[r][x];
+        ++n;
+        sx += x;
+        sy += y;
+      }
+    }
+    if (n == 0) continue;
+    // Texture at the centroid of the won samples (inside the polygon).
+    const double cxs = sx / n, cys = sy / n;
+    const double iz = q[6] * cxs + q[7] * cys + q[8];
+    const double inv = 1.0 / iz;
+    const float j = static_cast<float>((q[0] * cxs + q[1] * cys + q[2]) * inv);
+    const float k = static_cast<float>((q[3] * cxs + q[4] * cys + q[5]) * inv);
+    float c[3];
+    SampleTile(tile, j, k, vis.lod_c0 + v.lod_pixel - 1.5f * FastLog2(static_cast<float>(iz)), c);
+    const uint8_t b = static_cast<uint8_t>(std::min(255.0f, c[0]));
+    const uint8_t g = static_cast<uint8_t>(std::min(255.0f, c[1]));
+    const uint8_t rr = static_cast<uint8_t>(std::min(255.0f, c[2]));
+    for (int m = 0; m < n; ++m) {
+      uint8_t* out = color_.ptr<uint8_t>(s->hit_y[m]) + 3 * s->hit_x[m];
+      out[0] = b;
+      out[1] = g;
+      out[2] = rr;
+      inv_depth_(s->hit_y[m], s->hit_x[m]) = s->hit_z[m];
+      sample_labels_(s->hit_y[m], s->hit_x[m]) = vis.piece->label;
+    }
+  }
+}
+
+// Sky where nothing was drawn in sample rows y0..y1: a gradient by the ray's elevation.
+void Renderer::PaintSky(const View& v, int y0, int y1) {
+  const cv::Vec3f horizon(options_.sky_horizon_bgr), zenith(options_.sky_zenith_bgr);
+  for (int y = y0; y <= y1; ++y) {
+    const int* lrow = sample_labels_.ptr<int>(y);
+    uint8_t* crow = color_.ptr<uint8_t>(y);
+    const double b = (y - v.cy) / v.fy;
+    for (int x = 0; x < v.ws; ++x) {
+      if (lrow[x] != kMbSky) continue;
+      const double a = (x - v.cx) / v.fx;
+      const double dz = v.r_wc(2, 0) * a + v.r_wc(2, 1) * b + v.r_wc(2, 2);
+      const double elev = dz / std::sqrt(a * a + b * b + 1.0);
+      const float w = static_cast<float>(std::clamp(1.8 * elev, 0.0, 1.0));
+      const cv::Vec3f c = horizon + (zenith - horizon) * w;
+      for (int ch = 0; ch < 3; ++ch) crow[3 * x + ch] = static_cast<uint8_t>(c[ch] + 0.5f);
+    }
+  }
+}
+
+// Rasterises in bands of output rows (one writer per pixel; the same piece
+// order everywhere). Coverage and depth are resolved per sample; the texture
+// is sampled once per output pixel and piece, at the centroid of the samples
+// it wins (multisample anti-aliasing), with the footprint of an output pixel.
+void Renderer::Rasterise(const View& v, const std::vector<Visible>& visible) {
+  color_.create(v.hs, v.ws, CV_8UC3);
+  inv_depth_.create(v.hs, v.ws);
+  sample_labels_.create(v.hs, v.ws);
   color_.setTo(cv::Scalar::all(0));
   inv_depth_.setTo(0.0f);
   sample_labels_.setTo(static_cast<int>(kMbSky));
-  cv::Mat& color = color_;
-  cv::Mat1f& inv_depth = inv_depth_;
-  cv::Mat1i& sample_labels = sample_labels_;
   const int band_rows = 8;  // output rows
-  const int bands = (H + band_rows - 1) / band_rows;
-  const float lod_pixel = static_cast<float>(std::log2(static_cast<double>(ss)));
+  const int bands = (v.H + band_rows - 1) / band_rows;
   cv::parallel_for_(cv::Range(0, bands), [&](const cv::Range& range) {
-    int span0[4], span1[4];
-    int hit_x[16], hit_y[16];
-    float hit_z[16];
-    std::vector<float> iz_rows[4];
-    std::vector<uint8_t> won_rows[4];
-    for (int r = 0; r < ss; ++r) {
-      iz_rows[r].resize(ws);
-      won_rows[r].resize(ws);
+    RowScratch scratch;
+    for (int r = 0; r < v.ss; ++r) {
+      scratch.iz_rows[r].resize(v.ws);
+      scratch.won_rows[r].resize(v.ws);
     }
     for (int band = range.start; band < range.end; ++band) {
-      const int row0 = band * band_rows, row1 = std::min(H, row0 + band_rows) - 1;
-      const int yb0 = row0 * ss, yb1 = (row1 + 1) * ss - 1;
+      const int row0 = band * band_rows, row1 = std::min(v.H, row0 + band_rows) - 1;
+      const int yb0 = row0 * v.ss, yb1 = (row1 + 1) * v.ss - 1;
       for (const Visible& vis : visible) {
         if (vis.y1 < yb0 || vis.y0 > yb1) continue;
-        const Tile& tile = *vis.tile;
-        const double* q = vis.q;
-        const int label = vis.piece->label;
-        const size_t nv = vis.poly.size();
-        const int r0 = std::max(row0, vis.y0 / ss), r1 = std::min(row1, vis.y1 / ss);
-        for (int row = r0; row <= r1; ++row) {
-          // Covered samples of each sample row: pixel centres inside the polygon.
-          int px0 = ws, px1 = -1;
-          for (int r = 0; r < ss; ++r) {
-            const int y = row * ss + r;
-            span0[r] = 0;
-            span1[r] = -1;
-            if (y < vis.y0 || y > vis.y1) continue;
-            double xl = 1e300, xr = -1e300;
-            for (size_t e = 0; e < nv; ++e) {
-              const Eigen::Vector2d& a = vis.poly[e];
-              const Eigen::Vector2d& b = vis.poly[(e + 1) % nv];
-              if ((a.y() <= y && b.y() >= y) || (b.y() <= y && a.y() >= y)) {
-                if (a.y() == b.y()) {
-                  xl = std::min({xl, a.x(), b.x()});
-                  xr = std::max({xr, a.x(), b.x()});
-                } else {
-                  const double x = a.x() + (y - a.y()) * (b.x() - a.x()) / (b.y() - a.y());
-                  xl = std::min(xl, x);
-                  xr = std::max(xr, x);
-                }
-              }
-            }
-            span0[r] = std::max(0, static_cast<int>(std::ceil(xl - 1e-7)));
-            span1[r] = std::min(ws - 1, static_cast<int>(std::floor(xr + 1e-7)));
-            if (span0[r] <= span1[r]) {
-              px0 = std::min(px0, span0[r] / ss);
-              px1 = std::max(px1, span1[r] / ss);
-            }
-          }
-          // Depth test of each sample row's span in one tight loop.
-          for (int r = 0; r < ss; ++r) {
-            if (span0[r] > span1[r]) continue;
-            const int y = row * ss + r;
-            const float* zrow = inv_depth.ptr<float>(y);
-            const double wz = q[7] * y + q[8];
-            float* izr = iz_rows[r].data();
-            uint8_t* wr = won_rows[r].data();
-            for (int x = span0[r]; x <= span1[r]; ++x) {
-              const float izf = static_cast<float>(q[6] * x + wz);
-              izr[x] = izf;
-              wr[x] = izf > zrow[x];
-            }
-          }
-          for (int px = px0; px <= px1; ++px) {
-            int n = 0;
-            double sx = 0.0, sy = 0.0;
-            for (int r = 0; r < ss; ++r) {
-              const int y = row * ss + r;
-              const int xa = std::max(span0[r], px * ss), xb = std::min(span1[r], px * ss + ss - 1);
-              for (int x = xa; x <= xb; ++x) {
-                if (!won_rows[r][x]) continue;
-                hit_x[n] = x;
-                hit_y[n] = y;
-                hit_z[n] = iz_rows[r][x];
-                ++n;
-                sx += x;
-                sy += y;
-              }
-            }
-            if (n == 0) continue;
-            // Texture at the centroid of the won samples (inside the polygon).
-            const double cxs = sx / n, cys = sy / n;
-            const double iz = q[6] * cxs + q[7] * cys + q[8];
-            const double inv = 1.0 / iz;
-            const float j = static_cast<float>((q[0] * cxs + q[1] * cys + q[2]) * inv);
-            const float k = static_cast<float>((q[3] * cxs + q[4] * cys + q[5]) * inv);
-            float lod = vis.lod_c0 + lod_pixel - 1.5f * FastLog2(static_cast<float>(iz));
-            lod = std::max(lod, static_cast<float>(tile.finest));
-            int l0 = static_cast<int>(lod);
-            // Blend two levels only around the middle between them
-            // ("brilinear"): half the pixels need a single lookup.
-            float f = std::min(std::max(2.0f * (lod - l0) - 0.5f, 0.0f), 1.0f);
-            if (l0 >= tile.coarsest) {
-              l0 = tile.coarsest;
-              f = 0.0f;
-            }
-            float c[3] = {0.5f, 0.5f, 0.5f};  // + 0.5: the conversion below truncates
-            const float s0 = kLevelScale[l0];
-            if (f < 1.0f) BilinearAdd(tile.levels[l0], j * s0, k * s0, 1.0f - f, c);
-            if (f > 0.0f) {
-              BilinearAdd(tile.levels[l0 + 1], j * s0 * 0.5f, k * s0 * 0.5f, f, c);
-            }
-            const uint8_t b = static_cast<uint8_t>(std::min(255.0f, c[0]));
-            const uint8_t g = static_cast<uint8_t>(std::min(255.0f, c[1]));
-            const uint8_t rr = static_cast<uint8_t>(std::min(255.0f, c[2]));
-            for (int m = 0; m < n; ++m) {
-              uint8_t* out = color.ptr<uint8_t>(hit_y[m]) + 3 * hit_x[m];
-              out[0] = b;
-              out[1] = g;
-              out[2] = rr;
-              inv_depth(hit_y[m], hit_x[m]) = hit_z[m];
-              sample_labels(hit_y[m], hit_x[m]) = label;
-            }
-          }
-        }
+        const int r0 = std::max(row0, vis.y0 / v.ss), r1 = std::min(row1, vis.y1 / v.ss);
+        for (int row = r0; row <= r1; ++row) DrawRow(vis, v, row, &scratch);
       }
-      // Sky where nothing was drawn: a gradient by the ray's elevation.
-      const Eigen::Matrix3d r_wc = world_from_cam.R();
-      const cv::Vec3f horizon(options_.sky_horizon_bgr), zenith(options_.sky_zenith_bgr);
-      for (int y = yb0; y <= yb1; ++y) {
-        const int* lrow = sample_labels.ptr<int>(y);
-        uint8_t* crow = color.ptr<uint8_t>(y);
-        const double b = (y - cy) / fy;
-        for (int x = 0; x < ws; ++x) {
-          if (lrow[x] != kMbSky) continue;
-          const double a = (x - cx) / fx;
-          const double dz = r_wc(2, 0) * a + r_wc(2, 1) * b + r_wc(2, 2);
-          const double elev = dz / std::sqrt(a * a + b * b + 1.0);
-          const float w = static_cast<float>(std::clamp(1.8 * elev, 0.0, 1.0));
-          const cv::Vec3f c = horizon + (zenith - horizon) * w;
-          for (int ch = 0; ch < 3; ++ch) crow[3 * x + ch] = static_cast<uint8_t>(c[ch] + 0.5f);
-        }
-      }
+      PaintSky(v, yb0, yb1);
     }
   });
+}
 
-  // Resolve: box average to the output size, labels.
-  if (ss == 1) {
-    color.copyTo(frame->bgr);
-  } else {
-    cv::resize(color, frame->bgr, cv::Size(W, H), 0, 0, cv::INTER_AREA);
-  }
-  frame->labels.create(H, W, CV_32S);
+namespace {
+
+// Per output pixel, the label most of its samples see (ties: the first in
+// row-major order).
+void ResolveLabels(const cv::Mat1i& sample_labels, int ss, int W, int H, cv::Mat* labels) {
+  labels->create(H, W, CV_32S);
   for (int y = 0; y < H; ++y) {
-    int* out = frame->labels.ptr<int>(y);
+    int* out = labels->ptr<int>(y);
     for (int x = 0; x < W; ++x) {
-      // The label most samples of the pixel see (ties: the first in row-major order).
       int vals[16] = {0};
       int n = 0;
       bool uniform = true;
@@ -588,10 +636,12 @@ Status Renderer::Render(const Rigid3d& world_from_cam, RenderedFrame* frame) {
       out[x] = best;
     }
   }
-  frame->mb_labels = MacroblockLabels(sample_labels, ss, &frame->mb_cols, &frame->mb_rows,
-                                      &frame->mb_mixed_shares);
+}
 
-  // Drop tiles nobody used for a while.
+}  // namespace
+
+// Drops tiles nobody used for a while.
+void Renderer::EvictTiles() {
   for (auto it = tiles_.begin(); it != tiles_.end();) {
     if (stats_.frames - it->second->last_used > options_.cache_frames) {
       it = tiles_.erase(it);
@@ -600,6 +650,37 @@ Status Renderer::Render(const Rigid3d& world_from_cam, RenderedFrame* frame) {
     }
   }
   stats_.cached_tiles = tiles_.size();
+}
+
+Status Renderer::Render(const Rigid3d& world_from_cam, RenderedFrame* frame) {
+  if (frame == nullptr) return InvalidArgumentError("Render: null frame");
+  const auto t_start = Clock::now();
+  const View v = MakeView(world_from_cam);
+  std::unordered_map<uint64_t, int> requests;
+  std::vector<Visible> visible = FindVisible(v, &requests);
+
+  const auto t_tex = Clock::now();
+  MakeMissingTiles(requests);
+  const auto t_tex_done = Clock::now();
+  stats_.texture_s += SecondsBetween(t_tex, t_tex_done);
+  ++stats_.frames;
+  for (Visible& vis : visible) {
+    Tile* tile = tiles_.at(vis.piece->key).get();
+    tile->last_used = stats_.frames;
+    vis.tile = tile;
+  }
+
+  Rasterise(v, visible);
+  // Resolve: box average to the output size, labels.
+  if (v.ss == 1) {
+    color_.copyTo(frame->bgr);
+  } else {
+    cv::resize(color_, frame->bgr, cv::Size(v.W, v.H), 0, 0, cv::INTER_AREA);
+  }
+  ResolveLabels(sample_labels_, v.ss, v.W, v.H, &frame->labels);
+  frame->mb_labels = MacroblockLabels(sample_labels_, v.ss, &frame->mb_cols, &frame->mb_rows,
+                                      &frame->mb_mixed_shares);
+  EvictTiles();
   stats_.draw_s += SecondsBetween(t_start, Clock::now()) - SecondsBetween(t_tex, t_tex_done);
   return Status::Ok();
 }
@@ -609,7 +690,7 @@ std::vector<int> MacroblockLabels(const cv::Mat& sample_labels, int supersamplin
   if (mixed_shares != nullptr) mixed_shares->clear();
   const int ss = supersampling;
   const int W = sample_labels.cols / ss, H = sample_labels.rows / ss;
-  const int cols = (W + 15) / 16, rows = (H + 15) / 16;
+  const int cols = MbCount(W), rows = MbCount(H);
   *mb_cols = cols;
   *mb_rows = rows;
   std::vector<int> labels(static_cast<size_t>(cols) * rows, kMbMixed);
@@ -617,8 +698,8 @@ std::vector<int> MacroblockLabels(const cv::Mat& sample_labels, int supersamplin
   for (int by = 0; by < rows; ++by) {
     for (int bx = 0; bx < cols; ++bx) {
       counts.clear();
-      const int y0 = by * 16 * ss, y1 = std::min(H, (by + 1) * 16) * ss;
-      const int x0 = bx * 16 * ss, x1 = std::min(W, (bx + 1) * 16) * ss;
+      const int y0 = by * kMbSizePx * ss, y1 = std::min(H, (by + 1) * kMbSizePx) * ss;
+      const int x0 = bx * kMbSizePx * ss, x1 = std::min(W, (bx + 1) * kMbSizePx) * ss;
       int last = std::numeric_limits<int>::min();
       size_t last_idx = 0;
       for (int y = y0; y < y1; ++y) {

@@ -35,6 +35,7 @@
 
 #include <cstdint>
 #include <map>
+#include <optional>
 #include <memory>
 #include <unordered_map>
 #include <vector>
@@ -91,9 +92,25 @@ class Renderer {
   struct Piece;
   struct Tile;
   struct Visible;
+  struct View;
+  struct RowScratch;
   Renderer(const Scene& scene, const Intrinsics& intrinsics, const RenderOptions& options);
   void BuildPieces();
   void MakeTiles(const std::vector<std::pair<uint64_t, int>>& requests);
+  void MakeMissingTiles(const std::unordered_map<uint64_t, int>& requests);
+  void EvictTiles();
+  // Render's steps: the frame's camera, the pieces it sees (front to back),
+  // rasterising them and the sky into the supersampled buffers.
+  View MakeView(const Rigid3d& world_from_cam) const;
+  std::vector<Eigen::Vector2d> ClipToImage(const Piece& piece, const View& v) const;
+  std::optional<Visible> ProjectPiece(const Piece& piece, const View& v) const;
+  std::vector<Visible> FindVisible(const View& v,
+                                   std::unordered_map<uint64_t, int>* requests) const;
+  void Rasterise(const View& v, const std::vector<Visible>& visible);
+  static void CoverRow(const Visible& vis, const View& v, int row, RowScratch* s);
+  void DrawRow(const Visible& vis, const View& v, int row, RowScratch* s);
+  static void SampleTile(const Tile& tile, float j, float k, float lod, float c[3]);
+  void PaintSky(const View& v, int y0, int y1);
 
   const Scene& scene_;
   Intrinsics intrinsics_;

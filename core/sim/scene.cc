@@ -4,6 +4,7 @@
 #include <cmath>
 #include <string>
 
+#include "core/common/angles.h"
 #include "core/sim/random.h"
 
 namespace slapse {
@@ -37,7 +38,10 @@ int Scene::AddPlane(PlaneKind kind, const Eigen::Vector3d& normal_world,
 
 namespace {
 
-constexpr double kDeg = M_PI / 180.0;
+// Radians per degree (angles.h: DegToRad(1) is exactly pi / 180). The path
+// and scene multiply by it, which is not DegToRad's x * pi / 180 bit for bit:
+// kept so that simulated drives stay identical.
+const double kDeg = DegToRad(1.0);
 using Eigen::Vector2d;
 using Eigen::Vector3d;
 using Polygon = std::vector<Vector3d>;

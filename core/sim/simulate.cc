@@ -4,8 +4,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <sstream>
 
+#include "core/common/json_io.h"
 #include "core/common/timing.h"
 #include "core/sim/ground_truth.h"
 
@@ -15,20 +15,41 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-std::string Num(double v) {
-  char buf[40];
-  std::snprintf(buf, sizeof(buf), "%.17g", v);
-  return buf;
-}
-
-std::string Quote(const std::string& s) {
-  std::string out = "\"";
-  for (char c : s) {
-    if (c == '"' || c == '\\') out += '\\';
-    if (static_cast<unsigned char>(c) < 0x20) continue;
-    out += c;
-  }
-  return out + "\"";
+// The full meta.json (a superset of what SaveGroundTruth wrote).
+Status WriteMeta(const SimulateOptions& o, const EncoderOptions& eo, const Drive& drive,
+                 const GroundTruth& gt, const SimulateReport& report) {
+  Json meta;
+  meta["seed"] = o.seed;
+  meta["video"] = o.video_name;
+  meta["codec"] = VideoCodecName(eo.codec);
+  meta["b_frames"] = eo.b_frames;
+  meta["gop_size"] = eo.gop_size;
+  meta["quality"] = eo.quality;
+  meta["mpeg4_qpel"] = eo.mpeg4_qpel;
+  meta["fps"] = o.fps;
+  meta["frames"] = gt.frames.size();
+  meta["width_px"] = o.width_px;
+  meta["height_px"] = o.height_px;
+  meta["hfov_deg"] = o.hfov_deg;
+  meta["mb_cols"] = gt.mb_cols;
+  meta["mb_rows"] = gt.mb_rows;
+  meta["duration_s"] = o.duration_s;
+  meta["min_speed_mps"] = o.min_speed_mps;
+  meta["max_speed_mps"] = o.max_speed_mps;
+  meta["trees"] = o.trees;
+  meta["supersampling"] = o.supersampling;
+  meta["camera_height_m"] = drive.path.camera_height_m;
+  meta["pitch_down_deg"] = drive.path.pitch_down_deg;
+  meta["distance_m"] = drive.path.distance_m;
+  meta["num_planes"] = drive.scene.planes.size();
+  meta["render_s"] = report.render_s;
+  meta["encode_s"] = report.encode_s;
+  const auto meta_path = std::filesystem::path(o.output_dir) / "meta.json";
+  std::ofstream out(meta_path, std::ios::trunc);
+  out << DumpJson(meta, ExactNumber);
+  out.close();
+  if (!out) return DataLossError("failed writing " + meta_path.string());
+  return Status::Ok();
 }
 
 }  // namespace
@@ -94,33 +115,7 @@ Status SimulateDrive(const SimulateOptions& o, SimulateReport* report) {
   report->num_planes = static_cast<int>(drive.scene.planes.size());
   report->video_path = video_path;
 
-  // The full meta.json (a superset of what SaveGroundTruth wrote).
-  std::ostringstream meta;
-  meta << "{\n  \"seed\": " << o.seed << ",\n  \"video\": " << Quote(o.video_name)
-       << ",\n  \"codec\": " << Quote(VideoCodecName(eo.codec))
-       << ",\n  \"b_frames\": " << eo.b_frames << ",\n  \"gop_size\": " << eo.gop_size
-       << ",\n  \"quality\": " << eo.quality
-       << ",\n  \"mpeg4_qpel\": " << (eo.mpeg4_qpel ? "true" : "false")
-       << ",\n  \"fps\": " << Num(o.fps) << ",\n  \"frames\": " << n
-       << ",\n  \"width_px\": " << o.width_px << ",\n  \"height_px\": " << o.height_px
-       << ",\n  \"hfov_deg\": " << Num(o.hfov_deg) << ",\n  \"mb_cols\": " << gt.mb_cols
-       << ",\n  \"mb_rows\": " << gt.mb_rows << ",\n  \"duration_s\": " << Num(o.duration_s)
-       << ",\n  \"min_speed_mps\": " << Num(o.min_speed_mps)
-       << ",\n  \"max_speed_mps\": " << Num(o.max_speed_mps)
-       << ",\n  \"trees\": " << (o.trees ? "true" : "false")
-       << ",\n  \"supersampling\": " << o.supersampling
-       << ",\n  \"camera_height_m\": " << Num(drive.path.camera_height_m)
-       << ",\n  \"pitch_down_deg\": " << Num(drive.path.pitch_down_deg)
-       << ",\n  \"distance_m\": " << Num(drive.path.distance_m)
-       << ",\n  \"num_planes\": " << drive.scene.planes.size()
-       << ",\n  \"render_s\": " << Num(report->render_s)
-       << ",\n  \"encode_s\": " << Num(report->encode_s) << "\n}\n";
-  const auto meta_path = std::filesystem::path(o.output_dir) / "meta.json";
-  std::ofstream out(meta_path, std::ios::trunc);
-  out << meta.str();
-  out.close();
-  if (!out) return DataLossError("failed writing " + meta_path.string());
-  return Status::Ok();
+  return WriteMeta(o, eo, drive, gt, *report);
 }
 
 }  // namespace slapse

@@ -229,14 +229,10 @@ float GlyphCoverage(uint64_t seed, double x, double y, double band_h, double st)
   return cov;
 }
 
-void FacadeTexture(const Scene& scene, const TextureDesc& d, const SampleGrid& g, cv::Mat3f* img) {
-  const FacadeStyle& f = scene.facades[d.style];
-  const Grid grid(g);
-  const double st = g.step_m, H = f.height_m, W = f.width_m;
-  const uint64_t seed = d.seed;
-  auto vz = [H](double z) { return H - z; };
-
-  // Wall material.
+// The wall's material: brick courses with mortar joints, or plain render.
+void DrawWallMaterial(const FacadeStyle& f, const Grid& grid, const SampleGrid& g, uint64_t seed,
+                      cv::Mat3f* img) {
+  const double st = g.step_m, H = f.height_m;
   const double bh = 0.075, bl = 0.225, mortar = 0.012;
   const float brick_detail = static_cast<float>(std::min(1.0, std::sqrt(bh * bl) / st));
   for (int j = 0; j < g.height; ++j) {
@@ -262,6 +258,73 @@ void FacadeTexture(const Scene& scene, const TextureDesc& d, const SampleGrid& g
       }
     }
   }
+}
+
+// A shop's ground floor: display windows with goods, a glass door and a
+// sign board with glyphs.
+void DrawShopFront(const FacadeStyle& f, const Grid& grid, double st, uint64_t seed,
+                   cv::Mat3f* img) {
+  const double H = f.height_m, gf = f.ground_floor_m;
+  auto vz = [H](double z) { return H - z; };
+  const Vec3f metal(52, 50, 48);
+  // Display windows left and right of the door, split into panes.
+  const double z0 = 0.5, z1 = gf - 1.2;
+  const double spans[2][2] = {{f.sign_u0_m + 0.15, f.door_u_m - 0.2},
+                              {f.door_u_m + f.door_w_m + 0.2, f.sign_u1_m - 0.15}};
+  for (const auto& span : spans) {
+    if (span[1] - span[0] < 0.6) continue;
+    FillRect(grid, span[0], span[1], vz(z1), vz(z0), metal, img);
+    const int panes = std::max(1, static_cast<int>(std::round((span[1] - span[0]) / 2.0)));
+    const double pw = (span[1] - span[0]) / panes;
+    for (int p = 0; p < panes; ++p) {
+      const double a = span[0] + p * pw + 0.06, b = span[0] + (p + 1) * pw - 0.06;
+      const WindowLook look = MakeWindowLook(Hash3(seed, -1, p, static_cast<int64_t>(a * 100)));
+      BlendRect(grid, a, b, vz(z1 - 0.06), vz(z0 + 0.06), 1.0f, img, [&](double u, double v) {
+        const double z = H - v;
+        Vec3f c = GlassColour(look, (u - a) / (b - a), (z - z0) / (z1 - z0), u);
+        // Goods on shelves: small coloured blocks behind the glass.
+        if (z < z0 + 0.55 * (z1 - z0)) {
+          const uint64_t hg = Hash2(seed ^ 0x600D, static_cast<int64_t>(std::floor(u / 0.22)),
+                                    static_cast<int64_t>(std::floor(z / 0.3)));
+          const Vec3f goods(60 + 150 * HashUnit(hg), 60 + 150 * HashUnit(Mix64(hg)),
+                            60 + 150 * HashUnit(Mix64(hg ^ 9)));
+          c = Mix(c, goods, 0.55f);
+        }
+        return c;
+      });
+    }
+  }
+  // Glass door.
+  FillRect(grid, f.door_u_m, f.door_u_m + f.door_w_m, vz(2.3), vz(0.0), metal, img);
+  const WindowLook door_look = MakeWindowLook(Hash2(seed, 0xD00, 1));
+  BlendRect(grid, f.door_u_m + 0.07, f.door_u_m + f.door_w_m - 0.07, vz(2.23), vz(0.1), 1.0f, img,
+            [&](double u, double v) {
+              return GlassColour(door_look, (u - f.door_u_m) / f.door_w_m, (H - v) / 2.3, u);
+            });
+  // Sign board with a frame and glyphs.
+  const double s0 = gf - 0.95, s1 = gf - 0.2;
+  FillRect(grid, f.sign_u0_m - 0.05, f.sign_u1_m + 0.05, vz(s1 + 0.05), vz(s0 - 0.05),
+           f.trim_bgr * 0.5f, img);
+  const double t0 = s0 + 0.12, t1 = s1 - 0.12;
+  BlendRect(grid, f.sign_u0_m, f.sign_u1_m, vz(s1), vz(s0), 1.0f, img, [&](double u, double v) {
+    const double z = H - v;
+    Vec3f c = f.sign_bgr * static_cast<float>(0.9 + 0.2 * (z - s0) / (s1 - s0));
+    if (z > t0 - st && z < t1 + st && u > f.sign_u0_m + 0.15 && u < f.sign_u1_m - 0.15) {
+      const float ink = GlyphCoverage(seed ^ 0x5161, u - f.sign_u0_m - 0.15, z - t0, t1 - t0, st);
+      c = Mix(c, f.glyph_bgr, ink);
+    }
+    return c;
+  });
+}
+
+void FacadeTexture(const Scene& scene, const TextureDesc& d, const SampleGrid& g, cv::Mat3f* img) {
+  const FacadeStyle& f = scene.facades[d.style];
+  const Grid grid(g);
+  const double st = g.step_m, H = f.height_m, W = f.width_m;
+  const uint64_t seed = d.seed;
+  auto vz = [H](double z) { return H - z; };
+
+  DrawWallMaterial(f, grid, g, seed, img);
   // Plinth, cornices, coping.
   FillRect(grid, -1.0, W + 1.0, vz(0.55), vz(-1.0), Vec3f(118, 124, 130), img);
   if (f.cornices) {
@@ -294,56 +357,8 @@ void FacadeTexture(const Scene& scene, const TextureDesc& d, const SampleGrid& g
   // Ground floor.
   const double gf = f.ground_floor_m;
   const double door_c = f.door_u_m + 0.5 * f.door_w_m;
-  const Vec3f metal(52, 50, 48);
   if (f.shop) {
-    // Display windows left and right of the door, split into panes.
-    const double z0 = 0.5, z1 = gf - 1.2;
-    const double spans[2][2] = {{f.sign_u0_m + 0.15, f.door_u_m - 0.2},
-                                {f.door_u_m + f.door_w_m + 0.2, f.sign_u1_m - 0.15}};
-    for (const auto& span : spans) {
-      if (span[1] - span[0] < 0.6) continue;
-      FillRect(grid, span[0], span[1], vz(z1), vz(z0), metal, img);
-      const int panes = std::max(1, static_cast<int>(std::round((span[1] - span[0]) / 2.0)));
-      const double pw = (span[1] - span[0]) / panes;
-      for (int p = 0; p < panes; ++p) {
-        const double a = span[0] + p * pw + 0.06, b = span[0] + (p + 1) * pw - 0.06;
-        const WindowLook look = MakeWindowLook(Hash3(seed, -1, p, static_cast<int64_t>(a * 100)));
-        BlendRect(grid, a, b, vz(z1 - 0.06), vz(z0 + 0.06), 1.0f, img, [&](double u, double v) {
-          const double z = H - v;
-          Vec3f c = GlassColour(look, (u - a) / (b - a), (z - z0) / (z1 - z0), u);
-          // Goods on shelves: small coloured blocks behind the glass.
-          if (z < z0 + 0.55 * (z1 - z0)) {
-            const uint64_t hg = Hash2(seed ^ 0x600D, static_cast<int64_t>(std::floor(u / 0.22)),
-                                      static_cast<int64_t>(std::floor(z / 0.3)));
-            const Vec3f goods(60 + 150 * HashUnit(hg), 60 + 150 * HashUnit(Mix64(hg)),
-                              60 + 150 * HashUnit(Mix64(hg ^ 9)));
-            c = Mix(c, goods, 0.55f);
-          }
-          return c;
-        });
-      }
-    }
-    // Glass door.
-    FillRect(grid, f.door_u_m, f.door_u_m + f.door_w_m, vz(2.3), vz(0.0), metal, img);
-    const WindowLook door_look = MakeWindowLook(Hash2(seed, 0xD00, 1));
-    BlendRect(grid, f.door_u_m + 0.07, f.door_u_m + f.door_w_m - 0.07, vz(2.23), vz(0.1), 1.0f, img,
-              [&](double u, double v) {
-                return GlassColour(door_look, (u - f.door_u_m) / f.door_w_m, (H - v) / 2.3, u);
-              });
-    // Sign board with a frame and glyphs.
-    const double s0 = gf - 0.95, s1 = gf - 0.2;
-    FillRect(grid, f.sign_u0_m - 0.05, f.sign_u1_m + 0.05, vz(s1 + 0.05), vz(s0 - 0.05),
-             f.trim_bgr * 0.5f, img);
-    const double t0 = s0 + 0.12, t1 = s1 - 0.12;
-    BlendRect(grid, f.sign_u0_m, f.sign_u1_m, vz(s1), vz(s0), 1.0f, img, [&](double u, double v) {
-      const double z = H - v;
-      Vec3f c = f.sign_bgr * static_cast<float>(0.9 + 0.2 * (z - s0) / (s1 - s0));
-      if (z > t0 - st && z < t1 + st && u > f.sign_u0_m + 0.15 && u < f.sign_u1_m - 0.15) {
-        const float ink = GlyphCoverage(seed ^ 0x5161, u - f.sign_u0_m - 0.15, z - t0, t1 - t0, st);
-        c = Mix(c, f.glyph_bgr, ink);
-      }
-      return c;
-    });
+    DrawShopFront(f, grid, st, seed, img);
   } else {
     // Wooden door in a frame.
     FillRect(grid, f.door_u_m - 0.08, f.door_u_m + f.door_w_m + 0.08, vz(2.38), vz(0.0), f.trim_bgr,
@@ -424,20 +439,22 @@ float AsphaltWear(uint64_t seed, double u, double v, double st) {
   return factor;
 }
 
-void RoadTexture(const Scene& scene, const TextureDesc& d, const SampleGrid& g, cv::Mat3f* img) {
-  const RoadStyle& r = scene.road;
-  const Centreline& cl = scene.centreline;
-  const double st = g.step_m, hw = r.half_width_m;
-  const uint64_t seed = d.seed;
-  auto world = [&](double u, double v) -> Eigen::Vector2d {
-    return r.origin_xy + u * r.u_xy + v * r.v_xy;
-  };
+// The road's curvilinear coordinates (s along the centreline, lateral
+// offset) on a grid of every kRoadGridStep-th sample of a tile (+ 1 beyond),
+// for bilinear interpolation per sample.
+constexpr int kRoadGridStep = 8;
+struct RoadGrid {
+  int cols = 0, rows = 0;
+  std::vector<double> s, lateral;  // row-major
+};
 
-  // Curvilinear coordinates (s, lateral) on a coarse grid, interpolated per sample.
-  const int kStep = 8;
-  const int cw = (g.width - 1) / kStep + 2, ch = (g.height - 1) / kStep + 2;
-  const Eigen::Vector2d centre = world(g.u0_m + 0.5 * g.width * st, g.v0_m + 0.5 * g.height * st);
-  const double tile_r = 0.75 * std::max(g.width, g.height) * st;
+RoadGrid MakeRoadGrid(const RoadStyle& r, const Centreline& cl, const SampleGrid& g,
+                      const Eigen::Vector2d& centre, double tile_r) {
+  const double st = g.step_m;
+  const int kStep = kRoadGridStep;
+  RoadGrid grid;
+  grid.cols = (g.width - 1) / kStep + 2;
+  grid.rows = (g.height - 1) / kStep + 2;
   const double reach = std::max(r.strip_left_m, r.strip_right_m) + 10.0;
   int seg_lo = -1, seg_hi = -2;
   const auto& segs = cl.segments();
@@ -448,16 +465,86 @@ void RoadTexture(const Scene& scene, const TextureDesc& d, const SampleGrid& g, 
       seg_hi = k;
     }
   }
-  std::vector<double> cs(static_cast<size_t>(cw) * ch), cl_lat(cs.size());
-  for (int y = 0; y < ch; ++y) {
-    for (int x = 0; x < cw; ++x) {
-      const Eigen::Vector2d p = world(g.u0_m + x * kStep * st, g.v0_m + y * kStep * st);
+  grid.s.resize(static_cast<size_t>(grid.cols) * grid.rows);
+  grid.lateral.resize(grid.s.size());
+  for (int y = 0; y < grid.rows; ++y) {
+    for (int x = 0; x < grid.cols; ++x) {
+      const double u = g.u0_m + x * kStep * st, v = g.v0_m + y * kStep * st;
+      const Eigen::Vector2d p = r.origin_xy + u * r.u_xy + v * r.v_xy;
       double s = 0, l = 1e9;
       if (seg_lo >= 0) cl.Project(p, &s, &l, seg_lo, seg_hi);
-      cs[static_cast<size_t>(y) * cw + x] = s;
-      cl_lat[static_cast<size_t>(y) * cw + x] = l;
+      grid.s[static_cast<size_t>(y) * grid.cols + x] = s;
+      grid.lateral[static_cast<size_t>(y) * grid.cols + x] = l;
     }
   }
+  return grid;
+}
+
+// Coverage of paint at road coordinates (s, l): the dashed centre line, the
+// edge lines, crosswalks with their stop lines, and arrows.
+float RoadMarkings(const RoadStyle& r, double s, double l, double st) {
+  const double hw = r.half_width_m, al = std::abs(l);
+  float m = static_cast<float>(IntervalCoverage(l, -0.06, 0.06, st) *
+                               StripeCoverage(s, r.dash_period_m, r.dash_length_m, st));
+  m = std::max(m, static_cast<float>(IntervalCoverage(al, hw - 0.45, hw - 0.3, st)));
+  for (double sc : r.crosswalk_s_m) {
+    if (s < sc - 3.0 || s > sc + 7.0) continue;
+    const double inside = IntervalCoverage(l, -hw + 0.3, hw - 0.3, st);
+    m = std::max(m, static_cast<float>(IntervalCoverage(s, sc, sc + 4.0, st) * inside *
+                                       StripeCoverage(l + hw - 0.3, 1.0, 0.5, st)));
+    m = std::max(m, static_cast<float>(IntervalCoverage(s, sc - 2.0, sc - 1.6, st) *
+                                       IntervalCoverage(l, -hw + 0.3, -0.1, st)));
+    m = std::max(m, static_cast<float>(IntervalCoverage(s, sc + 5.6, sc + 6.0, st) *
+                                       IntervalCoverage(l, 0.1, hw - 0.3, st)));
+  }
+  for (const auto& a : r.arrows) {
+    const double dir = a.forward ? 1.0 : -1.0;
+    const double ds = (s - a.s_m) * dir, dl = (l - a.lateral_m) * dir;
+    if (ds < -0.5 || ds > 5.0 || std::abs(dl) > 0.6) continue;
+    float am = static_cast<float>(IntervalCoverage(ds, 0.0, 3.0, st) *
+                                  IntervalCoverage(dl, -0.08, 0.08, st));
+    if (ds > 2.9 && ds < 4.3) {
+      const double half = 0.4 * std::clamp((4.2 - ds) / 1.2, 0.0, 1.0);
+      am = std::max(am, static_cast<float>(IntervalCoverage(dl, -half, half, st) *
+                                           IntervalCoverage(ds, 3.0, 4.2, st)));
+    }
+    m = std::max(m, am);
+  }
+  return m;
+}
+
+// A manhole cover over colour *c at world point p: a dark disc with a grid
+// pattern and a rim.
+void DrawManhole(const RoadStyle::Manhole& mh, const Eigen::Vector2d& p, double st, Vec3f* c) {
+  const double dist = (p - mh.xy).norm();
+  const float cov = Clamp01(static_cast<float>((mh.radius_m - dist) / st + 0.5));
+  if (cov <= 0.0f) return;
+  const Eigen::Vector2d q = p - mh.xy;
+  const double grid_cov = 1.0 - (1.0 - StripeCoverage(q.x(), 0.06, 0.02, st)) *
+                                    (1.0 - StripeCoverage(q.y(), 0.06, 0.02, st));
+  const bool rim = dist > mh.radius_m - 0.05;
+  const Vec3f metal = rim ? Vec3f(70, 72, 74)
+                          : Vec3f(50, 52, 54) + Vec3f(30, 30, 30) * static_cast<float>(grid_cov);
+  *c = Mix(*c, metal, cov);
+}
+
+void RoadTexture(const Scene& scene, const TextureDesc& d, const SampleGrid& g, cv::Mat3f* img) {
+  const RoadStyle& r = scene.road;
+  const Centreline& cl = scene.centreline;
+  const double st = g.step_m, hw = r.half_width_m;
+  const uint64_t seed = d.seed;
+  auto world = [&](double u, double v) -> Eigen::Vector2d {
+    return r.origin_xy + u * r.u_xy + v * r.v_xy;
+  };
+
+  // Curvilinear coordinates (s, lateral) on a coarse grid, interpolated per sample.
+  const int kStep = kRoadGridStep;
+  const Eigen::Vector2d centre = world(g.u0_m + 0.5 * g.width * st, g.v0_m + 0.5 * g.height * st);
+  const double tile_r = 0.75 * std::max(g.width, g.height) * st;
+  const RoadGrid grid = MakeRoadGrid(r, cl, g, centre, tile_r);
+  const int cw = grid.cols, ch = grid.rows;
+  const std::vector<double>& cs = grid.s;
+  const std::vector<double>& cl_lat = grid.lateral;
 
   // Noise layers.
   cv::Mat1f lum(g.height, g.width, 0.0f), wear(g.height, g.width, 0.0f);
@@ -515,33 +602,7 @@ void RoadTexture(const Scene& scene, const TextureDesc& d, const SampleGrid& g, 
           const double lane = 0.5 * hw;
           const double tr = std::min({std::abs(al - (lane - 0.8)), std::abs(al - (lane + 0.8))});
           c *= static_cast<float>(1.0 - 0.1 * std::max(0.0, 1.0 - tr / 0.35));
-          // Markings.
-          float m = static_cast<float>(IntervalCoverage(l, -0.06, 0.06, st) *
-                                       StripeCoverage(s, r.dash_period_m, r.dash_length_m, st));
-          m = std::max(m, static_cast<float>(IntervalCoverage(al, hw - 0.45, hw - 0.3, st)));
-          for (double sc : r.crosswalk_s_m) {
-            if (s < sc - 3.0 || s > sc + 7.0) continue;
-            const double inside = IntervalCoverage(l, -hw + 0.3, hw - 0.3, st);
-            m = std::max(m, static_cast<float>(IntervalCoverage(s, sc, sc + 4.0, st) * inside *
-                                               StripeCoverage(l + hw - 0.3, 1.0, 0.5, st)));
-            m = std::max(m, static_cast<float>(IntervalCoverage(s, sc - 2.0, sc - 1.6, st) *
-                                               IntervalCoverage(l, -hw + 0.3, -0.1, st)));
-            m = std::max(m, static_cast<float>(IntervalCoverage(s, sc + 5.6, sc + 6.0, st) *
-                                               IntervalCoverage(l, 0.1, hw - 0.3, st)));
-          }
-          for (const auto& a : r.arrows) {
-            const double dir = a.forward ? 1.0 : -1.0;
-            const double ds = (s - a.s_m) * dir, dl = (l - a.lateral_m) * dir;
-            if (ds < -0.5 || ds > 5.0 || std::abs(dl) > 0.6) continue;
-            float am = static_cast<float>(IntervalCoverage(ds, 0.0, 3.0, st) *
-                                          IntervalCoverage(dl, -0.08, 0.08, st));
-            if (ds > 2.9 && ds < 4.3) {
-              const double half = 0.4 * std::clamp((4.2 - ds) / 1.2, 0.0, 1.0);
-              am = std::max(am, static_cast<float>(IntervalCoverage(dl, -half, half, st) *
-                                                   IntervalCoverage(ds, 3.0, 4.2, st)));
-            }
-            m = std::max(m, am);
-          }
+          const float m = RoadMarkings(r, s, l, st);
           if (m > 0.0f) c = Mix(c, paint, m * Clamp01(0.8f + 0.6f * wr[i]));
         }
       } else if (al < hw + r.curb_m) {
@@ -555,21 +616,7 @@ void RoadTexture(const Scene& scene, const TextureDesc& d, const SampleGrid& g, 
                                     (1.0 - StripeCoverage(q, 0.4, 0.012, st));
         c = Mix(paving * shade, joint, static_cast<float>(jt));
       }
-      // Manhole covers: a dark disc with a grid pattern and a rim.
-      for (const auto* mh : manholes) {
-        const Eigen::Vector2d p = world(u, v);
-        const double dist = (p - mh->xy).norm();
-        const float cov = Clamp01(static_cast<float>((mh->radius_m - dist) / st + 0.5));
-        if (cov <= 0.0f) continue;
-        const Eigen::Vector2d q = p - mh->xy;
-        const double grid_cov = 1.0 - (1.0 - StripeCoverage(q.x(), 0.06, 0.02, st)) *
-                                          (1.0 - StripeCoverage(q.y(), 0.06, 0.02, st));
-        const bool rim = dist > mh->radius_m - 0.05;
-        const Vec3f metal =
-            rim ? Vec3f(70, 72, 74)
-                : Vec3f(50, 52, 54) + Vec3f(30, 30, 30) * static_cast<float>(grid_cov);
-        c = Mix(c, metal, cov);
-      }
+      for (const auto* mh : manholes) DrawManhole(*mh, world(u, v), st, &c);
       row[i] = (c + Vec3f(n[i], n[i], n[i])) * d.gain;
     }
   }
