@@ -14,7 +14,7 @@
 #include "core/estimators/pair_motion.h"
 #include "core/mv/mv_reader.h"
 #include "core/pipeline/front_end.h"
-#include "core/sim/ground_truth.h"
+#include "lab/gt/ground_truth.h"
 
 namespace {
 

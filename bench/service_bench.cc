@@ -46,7 +46,7 @@ extern "C" {
 #include "api/convert.h"
 #include "client/lib/client.h"
 #include "core/common/intrinsics_io.h"
-#include "core/sim/simulate.h"
+#include "lab/sim/simulate.h"
 #include "server/server.h"
 
 namespace {

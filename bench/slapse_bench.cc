@@ -26,8 +26,8 @@ extern "C" {
 
 #include "core/mv/mv_reader.h"
 #include "core/pipeline/pipeline.h"
-#include "core/sim/ground_truth.h"
-#include "core/sim/simulate.h"
+#include "lab/gt/ground_truth.h"
+#include "lab/sim/simulate.h"
 
 namespace {
 

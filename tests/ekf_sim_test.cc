@@ -9,9 +9,9 @@
 #include <gtest/gtest.h>
 
 #include "core/ekf/plane_ekf.h"
-#include "core/eval/plane_map_eval.h"
-#include "core/eval/trajectory_eval.h"
-#include "core/sim/simulate.h"
+#include "lab/eval/plane_map_eval.h"
+#include "lab/eval/trajectory_eval.h"
+#include "lab/sim/simulate.h"
 #include "tests/test_streams.h"
 
 namespace slapse {

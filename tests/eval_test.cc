@@ -6,10 +6,10 @@
 #include <gtest/gtest.h>
 
 #include "core/common/so3.h"
-#include "core/eval/extraction_eval.h"
-#include "core/eval/plane_eval.h"
-#include "core/eval/trajectory_eval.h"
-#include "core/sim/simulate.h"
+#include "lab/eval/extraction_eval.h"
+#include "lab/eval/plane_eval.h"
+#include "lab/eval/trajectory_eval.h"
+#include "lab/sim/simulate.h"
 #include "tests/test_streams.h"
 
 namespace slapse {

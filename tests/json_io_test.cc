@@ -10,7 +10,7 @@
 
 #include "core/common/intrinsics_io.h"
 #include "core/common/json_io.h"
-#include "core/sim/ground_truth.h"
+#include "lab/gt/ground_truth.h"
 
 namespace slapse {
 namespace {

@@ -20,7 +20,7 @@
 #include "client/lib/client.h"
 #include "core/mv/mv_reader.h"
 #include "core/pipeline/pipeline.h"
-#include "core/sim/simulate.h"
+#include "lab/sim/simulate.h"
 #include "server/server.h"
 #include "tests/test_streams.h"
 

@@ -24,7 +24,7 @@
 #include <grpcpp/support/byte_buffer.h>
 
 #include "client/lib/client.h"
-#include "core/sim/simulate.h"
+#include "lab/sim/simulate.h"
 #include "server/server.h"
 #include "server/upload_queue.h"
 #include "tests/test_streams.h"

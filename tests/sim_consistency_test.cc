@@ -10,8 +10,8 @@
 #include <gtest/gtest.h>
 
 #include "core/mv/mv_reader.h"
-#include "core/sim/ground_truth.h"
-#include "core/sim/simulate.h"
+#include "lab/gt/ground_truth.h"
+#include "lab/sim/simulate.h"
 #include "tests/test_streams.h"
 
 namespace slapse {

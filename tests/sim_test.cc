@@ -12,12 +12,12 @@
 #include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
 
-#include "core/sim/camera_path.h"
-#include "core/sim/centreline.h"
-#include "core/sim/ground_truth.h"
-#include "core/sim/renderer.h"
-#include "core/sim/scene.h"
-#include "core/sim/simulate.h"
+#include "lab/sim/camera_path.h"
+#include "lab/sim/centreline.h"
+#include "lab/gt/ground_truth.h"
+#include "lab/sim/renderer.h"
+#include "lab/sim/scene.h"
+#include "lab/sim/simulate.h"
 
 namespace slapse {
 namespace {

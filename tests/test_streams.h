@@ -8,10 +8,10 @@
 
 #include <opencv2/core.hpp>
 
-#include "core/codec/video_encoder.h"
+#include "lab/codec/video_encoder.h"
 #include "core/common/camera.h"
 #include "core/common/status.h"
-#include "core/sim/simulate.h"
+#include "lab/sim/simulate.h"
 
 namespace slapse::testing {
 
@@ -28,7 +28,7 @@ cv::Mat NoiseTexture(int width_px, int height_px, uint64_t seed);
 Status WritePan(const std::string& path, const EncoderOptions& options, int frames, double vx_px,
                 double vy_px, int width_px = 320, int height_px = 240);
 
-// A simulated drive (core/sim) on disk.
+// A simulated drive (lab/sim) on disk.
 struct TestDrive {
   std::string dir;         // the simulator's output directory (ground truth, intrinsics.json)
   std::string video_path;  // the encoded drive

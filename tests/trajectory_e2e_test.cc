@@ -16,11 +16,11 @@
 
 #include <gtest/gtest.h>
 
-#include "core/eval/plane_map_eval.h"
-#include "core/eval/trajectory_eval.h"
+#include "lab/eval/plane_map_eval.h"
+#include "lab/eval/trajectory_eval.h"
 #include "core/mv/mv_reader.h"
 #include "core/pipeline/pipeline.h"
-#include "core/sim/ground_truth.h"
+#include "lab/gt/ground_truth.h"
 #include "tests/test_streams.h"
 
 namespace slapse {

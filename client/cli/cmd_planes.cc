@@ -11,14 +11,14 @@
 #include "client/cli/commands.h"
 #include "client/cli/flags.h"
 #include "core/common/intrinsics_io.h"
-#include "core/eval/extraction_eval.h"
+#include "lab/eval/extraction_eval.h"
 #include "core/merge/mv_merge.h"
 #include "core/mv/mv_reader.h"
 #include "core/pipeline/front_end.h"
 #include "core/planes/infinity.h"
 #include "core/planes/plane_extraction.h"
-#include "core/sim/simulate.h"
-#include "core/viz/plane_overlay.h"
+#include "lab/sim/simulate.h"
+#include "lab/viz/plane_overlay.h"
 
 namespace slapse::cli {
 namespace {

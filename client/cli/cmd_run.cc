@@ -12,14 +12,14 @@
 #include "client/cli/commands.h"
 #include "client/cli/flags.h"
 #include "core/common/intrinsics_io.h"
-#include "core/eval/plane_map_eval.h"
-#include "core/eval/trajectory_eval.h"
+#include "lab/eval/plane_map_eval.h"
+#include "lab/eval/trajectory_eval.h"
 #include "core/mv/mv_reader.h"
 #include "core/pipeline/pipeline.h"
 #include "core/pipeline/result_io.h"
-#include "core/sim/ground_truth.h"
-#include "core/viz/plane_overlay.h"
-#include "core/viz/top_down_plot.h"
+#include "lab/gt/ground_truth.h"
+#include "lab/viz/plane_overlay.h"
+#include "lab/viz/top_down_plot.h"
 
 namespace slapse::cli {
 namespace {

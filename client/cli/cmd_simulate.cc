@@ -4,7 +4,7 @@
 
 #include "client/cli/commands.h"
 #include "client/cli/flags.h"
-#include "core/sim/simulate.h"
+#include "lab/sim/simulate.h"
 
 namespace slapse::cli {
 namespace {

@@ -1,0 +1,201 @@
+#include "lab/codec/video_encoder.h"
+
+#include <cmath>
+
+extern "C" {
+#include <libavcodec/avcodec.h>
+#include <libavformat/avformat.h>
+#include <libavutil/opt.h>
+#include <libswscale/swscale.h>
+}
+
+namespace slapse {
+namespace {
+
+std::string AvErr(int err) {
+  char buf[AV_ERROR_MAX_STRING_SIZE] = {0};
+  av_strerror(err, buf, sizeof(buf));
+  return buf;
+}
+
+const char* EncoderName(VideoCodec codec) {
+  switch (codec) {
+    case VideoCodec::kMpeg2:
+      return "mpeg2video";
+    case VideoCodec::kMpeg4:
+      return "mpeg4";
+    case VideoCodec::kH264:
+      return "libx264";
+  }
+  return "";
+}
+
+}  // namespace
+
+const char* VideoCodecName(VideoCodec codec) {
+  switch (codec) {
+    case VideoCodec::kMpeg2:
+      return "mpeg2";
+    case VideoCodec::kMpeg4:
+      return "mpeg4";
+    case VideoCodec::kH264:
+      return "h264";
+  }
+  return "";
+}
+
+StatusOr<VideoCodec> ParseVideoCodec(const std::string& name) {
+  if (name == "mpeg2" || name == "mpeg2video") return VideoCodec::kMpeg2;
+  if (name == "mpeg4") return VideoCodec::kMpeg4;
+  if (name == "h264" || name == "libx264") return VideoCodec::kH264;
+  return InvalidArgumentError("unknown codec '" + name + "' (expected mpeg2, mpeg4 or h264)");
+}
+
+VideoEncoder::~VideoEncoder() {
+  if (!finished_ && mux_ != nullptr && mux_->pb != nullptr &&
+      !(mux_->oformat->flags & AVFMT_NOFILE)) {
+    avio_closep(&mux_->pb);
+  }
+  sws_freeContext(sws_);
+  av_packet_free(&pkt_);
+  av_frame_free(&yuv_);
+  avcodec_free_context(&enc_);
+  avformat_free_context(mux_);
+}
+
+StatusOr<std::unique_ptr<VideoEncoder>> VideoEncoder::Open(const std::string& path, int width_px,
+                                                           int height_px, const EncoderOptions& o) {
+  if (width_px <= 0 || height_px <= 0 || width_px % 2 != 0 || height_px % 2 != 0) {
+    return InvalidArgumentError("frame size must be positive and even, got " +
+                                std::to_string(width_px) + "x" + std::to_string(height_px));
+  }
+  if (o.fps <= 0) return InvalidArgumentError("fps must be positive");
+  if (o.b_frames < 0 || o.b_frames > 16) return InvalidArgumentError("b_frames must be 0..16");
+  if (o.gop_size < 1) return InvalidArgumentError("gop_size must be >= 1");
+
+  std::unique_ptr<VideoEncoder> e(new VideoEncoder());
+  e->path_ = path;
+  int err = avformat_alloc_output_context2(&e->mux_, nullptr, nullptr, path.c_str());
+  if (err < 0 || e->mux_ == nullptr) {
+    return InvalidArgumentError("no container for '" + path + "': " + AvErr(err));
+  }
+  const AVCodec* codec = avcodec_find_encoder_by_name(EncoderName(o.codec));
+  if (codec == nullptr) {
+    return FailedPreconditionError(std::string("FFmpeg has no encoder '") + EncoderName(o.codec) +
+                                   "'");
+  }
+  e->enc_ = avcodec_alloc_context3(codec);
+  AVCodecContext* c = e->enc_;
+  c->width = width_px;
+  c->height = height_px;
+  c->pix_fmt = AV_PIX_FMT_YUV420P;
+  c->framerate = av_d2q(o.fps, 100000);
+  c->time_base = av_inv_q(c->framerate);
+  c->gop_size = o.gop_size;
+  c->max_b_frames = o.b_frames;
+  c->thread_count = 1;  // deterministic output for a given input
+  if (e->mux_->oformat->flags & AVFMT_GLOBALHEADER) c->flags |= AV_CODEC_FLAG_GLOBAL_HEADER;
+
+  AVDictionary* opts = nullptr;
+  if (o.codec == VideoCodec::kH264) {
+    av_dict_set(&opts, "preset", "veryfast", 0);
+    av_dict_set_int(&opts, "crf", o.quality, 0);
+    // Fixed GOP: no adaptive B placement and no scene cuts; by default no
+    // B-pyramid and one reference, so every B frame refers to its two
+    // neighbouring anchors (the reading of MVs in docs/METHOD.md, "MV merging").
+    const std::string params =
+        std::string("scenecut=0:b-adapt=0:b-pyramid=") + (o.h264_b_pyramid ? "normal" : "none") +
+        ":ref=" + std::to_string(std::max(1, o.h264_refs)) +
+        ":bframes=" + std::to_string(o.b_frames) + ":keyint=" + std::to_string(o.gop_size) +
+        ":min-keyint=" + std::to_string(o.gop_size);
+    av_dict_set(&opts, "x264-params", params.c_str(), 0);
+  } else {
+    if (o.quality < 1 || o.quality > 31) {
+      avcodec_free_context(&e->enc_);
+      return InvalidArgumentError("MPEG quantiser must be 1..31");
+    }
+    c->flags |= AV_CODEC_FLAG_QSCALE;
+    c->global_quality = FF_QP2LAMBDA * o.quality;
+    av_dict_set(&opts, "sc_threshold", "1000000000", 0);  // no scene-cut I frames
+    av_dict_set(&opts, "b_strategy", "0", 0);             // always max_b_frames B frames
+    // A wider motion search than the defaults (diamond 1, 1 predictor): the
+    // near road of a driving video moves 20-40 px a frame.
+    av_dict_set(&opts, "dia_size", "4", 0);
+    av_dict_set(&opts, "last_pred", "3", 0);
+    if (o.codec == VideoCodec::kMpeg4 && o.mpeg4_qpel) c->flags |= AV_CODEC_FLAG_QPEL;
+  }
+  err = avcodec_open2(c, codec, &opts);
+  av_dict_free(&opts);
+  if (err < 0)
+    return InvalidArgumentError("cannot open encoder " + std::string(codec->name) + ": " +
+                                AvErr(err));
+
+  e->stream_ = avformat_new_stream(e->mux_, nullptr);
+  if (e->stream_ == nullptr) return ResourceExhaustedError("cannot add a stream");
+  e->stream_->time_base = c->time_base;
+  err = avcodec_parameters_from_context(e->stream_->codecpar, c);
+  if (err < 0) return InternalError("codec parameters: " + AvErr(err));
+  if (!(e->mux_->oformat->flags & AVFMT_NOFILE)) {
+    err = avio_open(&e->mux_->pb, path.c_str(), AVIO_FLAG_WRITE);
+    if (err < 0) return UnavailableError("cannot write '" + path + "': " + AvErr(err));
+  }
+  err = avformat_write_header(e->mux_, nullptr);
+  if (err < 0) return InternalError("cannot write the container header: " + AvErr(err));
+
+  e->yuv_ = av_frame_alloc();
+  e->pkt_ = av_packet_alloc();
+  e->yuv_->format = c->pix_fmt;
+  e->yuv_->width = width_px;
+  e->yuv_->height = height_px;
+  err = av_frame_get_buffer(e->yuv_, 0);
+  if (err < 0) return ResourceExhaustedError("frame buffer: " + AvErr(err));
+  e->sws_ = sws_getContext(width_px, height_px, AV_PIX_FMT_BGR24, width_px, height_px,
+                           AV_PIX_FMT_YUV420P, SWS_BICUBIC, nullptr, nullptr, nullptr);
+  if (e->sws_ == nullptr) return InternalError("cannot create the colour converter");
+  return StatusOr<std::unique_ptr<VideoEncoder>>(std::move(e));
+}
+
+Status VideoEncoder::Write(const cv::Mat& bgr) {
+  if (finished_) return FailedPreconditionError("encoder already finished");
+  if (bgr.type() != CV_8UC3 || bgr.cols != enc_->width || bgr.rows != enc_->height) {
+    return InvalidArgumentError("frame must be 8-bit BGR of " + std::to_string(enc_->width) + "x" +
+                                std::to_string(enc_->height));
+  }
+  int err = av_frame_make_writable(yuv_);
+  if (err < 0) return InternalError("frame not writable: " + AvErr(err));
+  const uint8_t* src[1] = {bgr.data};
+  const int stride[1] = {static_cast<int>(bgr.step[0])};
+  sws_scale(sws_, src, stride, 0, bgr.rows, yuv_->data, yuv_->linesize);
+  yuv_->pts = frames_++;
+  if (enc_->flags & AV_CODEC_FLAG_QSCALE) yuv_->quality = enc_->global_quality;
+  err = avcodec_send_frame(enc_, yuv_);
+  if (err < 0) return InternalError("encoding failed: " + AvErr(err));
+  return Drain(false);
+}
+
+Status VideoEncoder::Drain(bool flush) {
+  while (true) {
+    int err = avcodec_receive_packet(enc_, pkt_);
+    if (err == AVERROR(EAGAIN) && !flush) return Status::Ok();
+    if (err == AVERROR_EOF) return Status::Ok();
+    if (err < 0) return InternalError("encoding failed: " + AvErr(err));
+    av_packet_rescale_ts(pkt_, enc_->time_base, stream_->time_base);
+    pkt_->stream_index = stream_->index;
+    err = av_interleaved_write_frame(mux_, pkt_);  // takes ownership of pkt_'s data
+    if (err < 0) return UnavailableError("cannot write '" + path_ + "': " + AvErr(err));
+  }
+}
+
+Status VideoEncoder::Finish() {
+  if (finished_) return Status::Ok();
+  finished_ = true;
+  int err = avcodec_send_frame(enc_, nullptr);
+  if (err < 0) return InternalError("flushing failed: " + AvErr(err));
+  SLAPSE_RETURN_IF_ERROR(Drain(true));
+  err = av_write_trailer(mux_);
+  if (err < 0) return UnavailableError("cannot finish '" + path_ + "': " + AvErr(err));
+  if (!(mux_->oformat->flags & AVFMT_NOFILE)) avio_closep(&mux_->pb);
+  return Status::Ok();
+}
+
+}  // namespace slapse

@@ -1,0 +1,56 @@
+// The simulated car's camera path through a street scene.
+//
+// The car drives along the centre of the right lane (Scene::lane_offset_m) at
+// a speed that varies smoothly within [min_speed_mps, max_speed_mps]. The
+// camera sits camera_height_m above the road, looks along the lane's tangent
+// (the heading averaged over +-heading_smoothing_m of arc length, so the yaw
+// rate has no jumps where bends begin), pitched down by a fixed angle plus a
+// small pitch/roll vibration (a sum of sinusoids). Everything is a
+// deterministic function of the seed.
+//
+// Poses are world_from_cam (core/common/rigid3.h), camera frame x right, y
+// down, z forward; frame i is at t = i / fps.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "core/common/rigid3.h"
+#include "core/common/status.h"
+#include "lab/sim/scene.h"
+
+namespace slapse {
+
+struct PathOptions {
+  uint64_t seed = 1;
+  double fps = 30.0;
+  int num_frames = 300;
+  double min_speed_mps = 25.0 / 3.6;
+  double max_speed_mps = 50.0 / 3.6;
+  double start_s_m = 5.0;  // arc length of the first frame along the centreline
+  double camera_height_min_m = 1.3, camera_height_max_m = 1.6;
+  double pitch_down_min_deg = 2.0, pitch_down_max_deg = 5.0;
+  double vibration_deg = 0.3;        // peak pitch vibration; roll gets 0.7 of it
+  double heading_smoothing_m = 4.0;  // half-window of the heading average
+};
+
+struct CameraPath {
+  std::vector<double> timestamps_s;
+  std::vector<Rigid3d> world_from_cam;
+  std::vector<double> s_m;        // centreline arc length of each frame
+  std::vector<double> speed_mps;  // the car's speed at each frame
+  double distance_m = 0.0;        // driven from the first to the last frame
+  double camera_height_m = 0.0;
+  double pitch_down_deg = 0.0;  // fixed part of the pitch
+};
+
+// Longest distance a path with these options can cover, for sizing a street.
+double MaxPathLength(const PathOptions& options);
+
+StatusOr<CameraPath> GenerateCameraPath(const Scene& scene, const PathOptions& options);
+
+// Camera orientation for a heading (rad, CCW from world +x), pitch (rad,
+// positive looks down) and roll (rad, about the optical axis).
+Eigen::Matrix3d WorldFromCamRotation(double heading_rad, double pitch_down_rad, double roll_rad);
+
+}  // namespace slapse

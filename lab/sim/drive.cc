@@ -1,0 +1,44 @@
+#include <cmath>
+#include <string>
+
+#include "lab/sim/random.h"
+#include "lab/sim/simulate.h"
+
+namespace slapse {
+
+StatusOr<Drive> PrepareDrive(const SimulateOptions& o) {
+  if (!(o.duration_s > 0 && o.duration_s <= 3600)) {
+    return InvalidArgumentError("duration_s must be in (0, 3600]");
+  }
+  if (!(o.fps > 0 && o.fps <= 240)) return InvalidArgumentError("fps must be in (0, 240]");
+  if (o.width_px < 16 || o.height_px < 16 || o.width_px > 4096 || o.height_px > 4096) {
+    return InvalidArgumentError("frame size must be within 16..4096 pixels");
+  }
+  if (!(o.hfov_deg > 10 && o.hfov_deg < 150)) {
+    return InvalidArgumentError("hfov_deg must be in (10, 150)");
+  }
+  Drive drive;
+  drive.intrinsics = Intrinsics::FromHorizontalFov(o.width_px, o.height_px, o.hfov_deg);
+
+  PathOptions path;
+  path.seed = Mix64(o.seed ^ 0x0A11CE);
+  path.fps = o.fps;
+  path.num_frames = std::max(1, static_cast<int>(std::lround(o.duration_s * o.fps)));
+  path.min_speed_mps = o.min_speed_mps;
+  path.max_speed_mps = o.max_speed_mps;
+
+  SceneOptions scene;
+  scene.seed = o.seed;
+  scene.trees = o.trees;
+  // Room for the longest possible path plus 50 m of street ahead of the last frame.
+  scene.length_m = MaxPathLength(path) + 50.0;
+  auto sc = GenerateStreetScene(scene);
+  if (!sc.ok()) return sc.status();
+  drive.scene = std::move(sc).value();
+  auto p = GenerateCameraPath(drive.scene, path);
+  if (!p.ok()) return p.status();
+  drive.path = std::move(p).value();
+  return drive;
+}
+
+}  // namespace slapse

@@ -1,0 +1,62 @@
+// A simulated drive: scene + camera path + rendering + encoding + ground truth.
+//
+//   SimulateOptions opt;
+//   opt.seed = 7;
+//   opt.output_dir = "/tmp/drive7";
+//   SimulateReport report;
+//   Status s = SimulateDrive(opt, &report);
+//   // /tmp/drive7: drive.ts, trajectory_tum.txt, intrinsics.json, planes.json,
+//   //              mb_labels.txt, mb_mixed.txt, meta.json (formats in
+//   //              lab/gt/ground_truth.h)
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "lab/codec/video_encoder.h"
+#include "core/common/camera.h"
+#include "core/common/status.h"
+#include "lab/sim/camera_path.h"
+#include "lab/sim/renderer.h"
+#include "lab/sim/scene.h"
+
+namespace slapse {
+
+struct SimulateOptions {
+  uint64_t seed = 1;
+  double duration_s = 10.0;
+  double fps = 30.0;
+  int width_px = 640, height_px = 480;
+  double hfov_deg = 70.0;
+  double min_speed_mps = 25.0 / 3.6, max_speed_mps = 50.0 / 3.6;
+  bool trees = true;
+  int supersampling = 2;
+  // Encoder settings; its fps is replaced by `fps`.
+  EncoderOptions encoder;
+  std::string output_dir;
+  std::string video_name = "drive.ts";
+};
+
+struct SimulateReport {
+  int frames = 0;
+  double distance_m = 0.0;
+  double render_s = 0.0;  // wall time rendering (including texture making)
+  double encode_s = 0.0;  // wall time in the encoder
+  int num_planes = 0;
+  std::string video_path;
+};
+
+// Everything about a drive except its pixels: what SimulateDrive renders.
+struct Drive {
+  Scene scene;
+  CameraPath path;
+  Intrinsics intrinsics;
+};
+
+// Builds the scene (long enough for the path plus margin) and the path.
+StatusOr<Drive> PrepareDrive(const SimulateOptions& options);
+
+// Renders, encodes and writes a drive with its ground truth into options.output_dir.
+Status SimulateDrive(const SimulateOptions& options, SimulateReport* report);
+
+}  // namespace slapse
