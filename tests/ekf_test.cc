@@ -1,5 +1,6 @@
 // The EKF's analytic Jacobians against finite differences, and the filter on
 // exact synthetic plane correspondences with known motion.
+#include "core/common/angles.h"
 #include "core/ekf/plane_ekf.h"
 
 #include <cmath>
@@ -253,7 +254,7 @@ TEST(PlaneEkfTest, TracksMotionAndPlanesOnExactCorrespondences) {
     const Eigen::Vector3d true_pi = n_c / d_c;
     const double depth = 1.0 / track.pi.norm(), true_depth = 1.0 / true_pi.norm();
     EXPECT_NEAR(depth, true_depth, 0.02 * true_depth) << "plane " << track.track_id;
-    EXPECT_LT(std::acos(std::min(1.0, track.pi.normalized().dot(true_pi.normalized()))), M_PI / 180)
+    EXPECT_LT(AngleBetweenDeg(track.pi, true_pi), 1.0)
         << "plane " << track.track_id;
   }
 }

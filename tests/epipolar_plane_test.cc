@@ -11,6 +11,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include "core/common/angles.h"
 #include "core/estimators/epipolar_plane.h"
 #include "core/estimators/homography.h"
 #include "core/estimators/ransac.h"
@@ -147,7 +148,7 @@ TEST(EpipolarPlaneEstimatorTest, LeastSquaresUnderNoiseIsCloseToTheTruth) {
   EXPECT_LT(sum / later.size(), 0.15);
   // The normal direction is within a few degrees.
   const double angle_deg =
-      std::acos(std::min(1.0, models[0].normalized().dot(FacadeM().normalized()))) * 180 / M_PI;
+      AngleBetweenDeg(models[0], FacadeM());
   EXPECT_LT(angle_deg, 3.0);
 }
 

@@ -15,6 +15,7 @@
 #include <Eigen/Geometry>
 #include <Eigen/SVD>
 
+#include "core/common/angles.h"
 #include "core/common/camera.h"
 #include "core/common/rigid3.h"
 #include "core/merge/correspondence.h"
@@ -25,7 +26,7 @@ namespace slapse {
 namespace {
 
 constexpr int kCols = 40, kRows = 30;
-constexpr double kDegToRad = M_PI / 180.0;
+const double kDegToRad = DegToRad(1.0);
 
 Intrinsics TestIntrinsics() {
   Intrinsics k;

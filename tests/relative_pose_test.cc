@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 #include <Eigen/Geometry>
 
+#include "core/common/angles.h"
 #include "core/common/rigid3.h"
 #include "core/common/so3.h"
 #include "core/estimators/relative_pose.h"
@@ -16,7 +17,7 @@
 namespace slapse {
 namespace {
 
-constexpr double kDegToRad = M_PI / 180.0;
+const double kDegToRad = DegToRad(1.0);
 constexpr double kFocalPx = 457.0;
 
 double AngleDeg(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {

@@ -12,6 +12,7 @@
 #include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
 
+#include "core/common/angles.h"
 #include "lab/sim/camera_path.h"
 #include "lab/sim/centreline.h"
 #include "lab/gt/ground_truth.h"
@@ -22,7 +23,7 @@
 namespace slapse {
 namespace {
 
-constexpr double kDeg = M_PI / 180.0;
+const double kDeg = DegToRad(1.0);
 
 std::string TempDir(const std::string& name) {
   const auto dir = std::filesystem::temp_directory_path() /

@@ -7,6 +7,8 @@
 #include <string>
 #include <vector>
 
+#include "core/common/mb_grid.h"
+
 namespace slapse {
 
 enum class PictureType : uint8_t { kUnknown = 0, kI, kP, kB };
@@ -28,7 +30,7 @@ struct MotionVector {
   // block centre: reference position minus current position, in pixels, with
   // the codec's sub-pixel precision (FFmpeg motion_x / motion_scale).
   float dx_px = 0, dy_px = 0;
-  uint8_t w_px = 16, h_px = 16;  // block size
+  uint8_t w_px = kMbSizePx, h_px = kMbSizePx;  // block size
   RefDirection direction = RefDirection::kPast;
 };
 

@@ -1,6 +1,7 @@
 #include <cmath>
 #include <string>
 
+#include "core/common/mb_grid.h"
 #include "lab/sim/random.h"
 #include "lab/sim/simulate.h"
 
@@ -11,7 +12,7 @@ StatusOr<Drive> PrepareDrive(const SimulateOptions& o) {
     return InvalidArgumentError("duration_s must be in (0, 3600]");
   }
   if (!(o.fps > 0 && o.fps <= 240)) return InvalidArgumentError("fps must be in (0, 240]");
-  if (o.width_px < 16 || o.height_px < 16 || o.width_px > 4096 || o.height_px > 4096) {
+  if (o.width_px < kMbSizePx || o.height_px < kMbSizePx || o.width_px > 4096 || o.height_px > 4096) {
     return InvalidArgumentError("frame size must be within 16..4096 pixels");
   }
   if (!(o.hfov_deg > 10 && o.hfov_deg < 150)) {
