@@ -31,4 +31,21 @@ inline Plane3d TransformPlane(const Rigid3d& b_from_a, const Plane3d& plane_a) {
   return plane_b;
 }
 
+// The world plane `plane_world` in the camera whose pose is `world_from_cam`
+// (the inverse direction of TransformPlane, without inverting the pose):
+//   n_c = R_wc^T n_w,   d_c = d_w - n_w . t_wc.
+// The result is flipped to d_c >= 0 (the side the camera is on) when
+// `facing_camera` is set.
+inline Plane3d PlaneInCamera(const Rigid3d& world_from_cam, const Plane3d& plane_world,
+                             bool facing_camera = false) {
+  Plane3d plane_c;
+  plane_c.normal = world_from_cam.rotation.conjugate() * plane_world.normal;
+  plane_c.distance = plane_world.distance - plane_world.normal.dot(world_from_cam.translation);
+  if (facing_camera && plane_c.distance < 0) {
+    plane_c.normal = -plane_c.normal;
+    plane_c.distance = -plane_c.distance;
+  }
+  return plane_c;
+}
+
 }  // namespace slapse

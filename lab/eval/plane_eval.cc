@@ -4,6 +4,8 @@
 #include <limits>
 #include <map>
 
+#include "core/common/plane.h"
+
 namespace slapse {
 
 Eigen::Matrix3d TrueHomography(const GroundTruth& gt, int plane_id, int64_t earlier,
@@ -11,13 +13,10 @@ Eigen::Matrix3d TrueHomography(const GroundTruth& gt, int plane_id, int64_t earl
   const Rigid3d& world_from_later = gt.frames[later].world_from_cam;
   const Rigid3d earlier_from_later = gt.frames[earlier].world_from_cam.Inverse() * world_from_later;
   const GtPlane& p = gt.planes[plane_id];
-  // n_w . X_w = d_w with X_w = R_wc X_c + t_wc:  n_c = R_wc^T n_w, d_c = d_w - n_w . t_wc.
-  Eigen::Vector3d n_c = world_from_later.rotation.conjugate() * p.normal_world;
-  double d_c = p.distance_m - p.normal_world.dot(world_from_later.translation);
-  if (d_c < 0) {
-    n_c = -n_c;
-    d_c = -d_c;
-  }
+  const Plane3d plane_c = PlaneInCamera(world_from_later, {p.normal_world, p.distance_m},
+                                        /*facing_camera=*/true);
+  const Eigen::Vector3d& n_c = plane_c.normal;
+  const double d_c = plane_c.distance;
   const Eigen::Matrix3d K = gt.intrinsics.K();
   // X_earlier = R X_later + t = (R + t n_c^T / d_c) X_later on the plane.
   return K * (earlier_from_later.R() + earlier_from_later.translation * n_c.transpose() / d_c) *

@@ -1,6 +1,7 @@
 #include "lab/eval/plane_map_eval.h"
 
 #include "core/common/angles.h"
+#include "core/common/plane.h"
 
 #include <algorithm>
 #include <cmath>
@@ -36,11 +37,12 @@ StatusOr<PlaneMapErrors> EvaluatePlaneMap(const std::vector<PlaneEstimate>& esti
     acc.first_s = std::min(acc.first_s, frame.timestamp_s);
     acc.last_s = std::max(acc.last_s, frame.timestamp_s);
     if (best < 0 || !(e.pi_cam.norm() > 0)) continue;
-    // True plane in this camera: n_c = R_wc^T n_w, d_c = d_w - n_w . t_wc (flipped to d_c > 0).
+    // The true plane in this camera, on the camera's side.
     const GtPlane& p = gt.planes[best];
-    Eigen::Vector3d n_true = frame.world_from_cam.rotation.conjugate() * p.normal_world;
-    double d_true = p.distance_m - p.normal_world.dot(frame.world_from_cam.translation);
-    if (d_true < 0) n_true = -n_true, d_true = -d_true;
+    const Plane3d true_c = PlaneInCamera(frame.world_from_cam, {p.normal_world, p.distance_m},
+                                         /*facing_camera=*/true);
+    const Eigen::Vector3d& n_true = true_c.normal;
+    const double d_true = true_c.distance;
     const double d_est = metres_per_unit / e.pi_cam.norm();
     const double cos_angle = std::clamp(e.pi_cam.normalized().dot(n_true), -1.0, 1.0);
     acc.sum_d += std::abs(d_est - d_true);
