@@ -60,7 +60,7 @@ TEST_F(FrontEndTest, ComputesWhatTheStagesChainedByHandCompute) {
   const Intrinsics& k = drive_->intrinsics;
   FrontEnd front_end(k, sigma_px_);
   SegmentMerger merger(k.width_px, k.height_px, sigma_px_, MergeOptions());
-  InfinityPriorTracker tracker;
+  PairMotionPriorTracker tracker;
   PlaneExtractor extractor{PlaneExtractionOptions()};
   int pairs = 0, seeded = 0, planes = 0;
   for (const FrameRecord& frame : frames) {

@@ -217,7 +217,7 @@ TEST(ThresholdInfinityTest, PureRotationDropsNearlyAll) {
   const auto result = ThresholdInfinity(s.pair.correspondences, TestIntrinsics(), {});
   ASSERT_TRUE(result.ok()) << result.status().ToString();
   EXPECT_FALSE(result->has_motion);
-  EXPECT_EQ(result->rotation_source, InfinityRotationSource::kRotationOnly);
+  EXPECT_EQ(result->rotation_source, PairRotationSource::kRotationOnly);
   EXPECT_LT(RotationAngleDeg(result->later_from_earlier.R(), s.later_from_earlier.R()), 0.05);
   EXPECT_EQ(result->later_from_earlier.translation, Eigen::Vector3d::Zero());
   int good = 0, good_kept = 0;
@@ -265,7 +265,7 @@ TEST(ThresholdInfinityTest, ForwardMotionKeepsNearAndDropsFar) {
   const auto result = ThresholdInfinity(s.pair.correspondences, TestIntrinsics(), options);
   ASSERT_TRUE(result.ok()) << result.status().ToString();
   ASSERT_TRUE(result->has_motion);
-  EXPECT_EQ(result->rotation_source, InfinityRotationSource::kEssential);
+  EXPECT_EQ(result->rotation_source, PairRotationSource::kEssential);
   EXPECT_LT(RotationAngleDeg(result->later_from_earlier.R(), s.later_from_earlier.R()), 0.1);
   const Eigen::Vector3d t_true = s.later_from_earlier.translation.normalized();
   EXPECT_NEAR(result->later_from_earlier.translation.norm(), 1.0, 1e-9);
@@ -310,7 +310,7 @@ TEST(ThresholdInfinityTest, DegenerateInputIsNoMotionNotError) {
   auto result = ThresholdInfinity(few, TestIntrinsics(), {});
   ASSERT_TRUE(result.ok());
   EXPECT_FALSE(result->has_motion);
-  EXPECT_EQ(result->rotation_source, InfinityRotationSource::kIdentity);
+  EXPECT_EQ(result->rotation_source, PairRotationSource::kIdentity);
   EXPECT_EQ(result->parallax_px.size(), 10u);
 
   // A static camera (every MV zero): no motion, all on the plane at infinity.
@@ -356,7 +356,7 @@ TEST(ThresholdInfinityTest, SeededFastPathRecoversMotion) {
   EXPECT_FALSE(full->motion_from_prior);
   EXPECT_GT(full->num_sampson_inliers, 0.7 * s.label.size());
 
-  InfinityPrior prior;
+  PairMotionPrior prior;
   prior.later_from_earlier =
       Rigid3d(s.later_from_earlier.R() *
                   Eigen::AngleAxisd(1.0 * kDegToRad, Eigen::Vector3d(1, 2, -1).normalized())
@@ -367,7 +367,7 @@ TEST(ThresholdInfinityTest, SeededFastPathRecoversMotion) {
   ASSERT_TRUE(seeded.ok());
   ASSERT_TRUE(seeded->has_motion);
   EXPECT_TRUE(seeded->motion_from_prior);
-  EXPECT_EQ(seeded->rotation_source, InfinityRotationSource::kEssential);
+  EXPECT_EQ(seeded->rotation_source, PairRotationSource::kEssential);
   EXPECT_LT(RotationAngleDeg(seeded->later_from_earlier.R(), s.later_from_earlier.R()), 0.05);
   EXPECT_GT(
       seeded->later_from_earlier.translation.dot(s.later_from_earlier.translation.normalized()),
@@ -401,15 +401,15 @@ TEST(ThresholdInfinityTest, SeededFastPathFallsBack) {
   ASSERT_TRUE(full.ok() && full->has_motion);
   const double ratio = static_cast<double>(full->num_sampson_inliers) / fwd.label.size();
 
-  InfinityPrior wrong;  // sideways, turned by 30 deg
+  PairMotionPrior wrong;  // sideways, turned by 30 deg
   wrong.later_from_earlier =
       Rigid3d(Eigen::AngleAxisd(30 * kDegToRad, Eigen::Vector3d::UnitY()).toRotationMatrix(),
               Eigen::Vector3d(1, 0, 0));
   wrong.reference_inlier_ratio = ratio;
-  InfinityPrior unreachable;  // the right motion, but an inlier share no fit reaches
+  PairMotionPrior unreachable;  // the right motion, but an inlier share no fit reaches
   unreachable.later_from_earlier = fwd.later_from_earlier;
   unreachable.reference_inlier_ratio = 1.2 * ratio;
-  for (const InfinityPrior* prior : {&wrong, &unreachable}) {
+  for (const PairMotionPrior* prior : {&wrong, &unreachable}) {
     const auto result = ThresholdInfinity(fwd.pair.correspondences, TestIntrinsics(), {}, prior);
     ASSERT_TRUE(result.ok());
     EXPECT_FALSE(result->motion_from_prior);
@@ -421,14 +421,14 @@ TEST(ThresholdInfinityTest, SeededFastPathFallsBack) {
   // A pure rotation after a forward pair: the fast path never says "no
   // motion", the full path does.
   const SyntheticPair rot = MakePair(Frame0(), CamFromWorld({0, 0, 0}, 2.0, 0.7), 0, noise);
-  InfinityPrior previous;
+  PairMotionPrior previous;
   previous.later_from_earlier = fwd.later_from_earlier;
   previous.reference_inlier_ratio = ratio;
   const auto result = ThresholdInfinity(rot.pair.correspondences, TestIntrinsics(), {}, &previous);
   ASSERT_TRUE(result.ok());
   EXPECT_FALSE(result->has_motion);
   EXPECT_FALSE(result->motion_from_prior);
-  EXPECT_EQ(result->rotation_source, InfinityRotationSource::kRotationOnly);
+  EXPECT_EQ(result->rotation_source, PairRotationSource::kRotationOnly);
   EXPECT_LT(RotationAngleDeg(result->later_from_earlier.R(), rot.later_from_earlier.R()), 0.05);
 }
 
@@ -437,14 +437,14 @@ TEST(InfinityPriorTrackerTest, PriorOnlyForConsecutivePairsWithMotion) {
   SceneNoise noise;
   noise.seed = 8;
   const SyntheticPair first = MakePair(Frame0(), Frame1(), 0, noise);
-  InfinityPriorTracker tracker;
+  PairMotionPriorTracker tracker;
   EXPECT_EQ(tracker.PriorFor(first.pair), nullptr);
   const auto full = ThresholdInfinity(first.pair.correspondences, TestIntrinsics(), {});
   ASSERT_TRUE(full.ok() && full->has_motion);
   tracker.Record(first.pair, &*full);
 
   const SyntheticPair second = MakePair(Frame1(), Frame2(), 1, noise);
-  const InfinityPrior* prior = tracker.PriorFor(second.pair);
+  const PairMotionPrior* prior = tracker.PriorFor(second.pair);
   ASSERT_NE(prior, nullptr);
   EXPECT_EQ(prior->later_from_earlier.translation, full->later_from_earlier.translation);
   const double reference = static_cast<double>(full->num_sampson_inliers) / first.label.size();

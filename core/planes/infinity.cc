@@ -9,7 +9,7 @@ namespace slapse {
 StatusOr<InfinityResult> ThresholdInfinity(const std::vector<Correspondence>& correspondences,
                                            const Intrinsics& intrinsics,
                                            const InfinityOptions& options,
-                                           const InfinityPrior* prior) {
+                                           const PairMotionPrior* prior) {
   if (!(options.tau_inf_px > 0.0)) {
     return InvalidArgumentError("ThresholdInfinity: tau_inf_px must be > 0, got " +
                                 std::to_string(options.tau_inf_px));

@@ -38,11 +38,6 @@ struct InfinityOptions : PairMotionOptions {
   double tau_inf_px = 6.0;
 };
 
-// Names this stage's callers know the motion's types by.
-using InfinityPrior = PairMotionPrior;
-using InfinityRotationSource = PairRotationSource;
-using InfinityPriorTracker = PairMotionPriorTracker;
-
 // The pair's motion and its thresholding.
 struct InfinityResult : PairMotionReport {
   std::vector<double> parallax_px;   // per correspondence, w.r.t. R_later_from_earlier
@@ -59,7 +54,7 @@ struct InfinityResult : PairMotionReport {
 StatusOr<InfinityResult> ThresholdInfinity(const std::vector<Correspondence>& correspondences,
                                            const Intrinsics& intrinsics,
                                            const InfinityOptions& options,
-                                           const InfinityPrior* prior = nullptr);
+                                           const PairMotionPrior* prior = nullptr);
 
 // The thresholding alone, given the pair's motion (motion.R_later_from_earlier).
 InfinityResult ThresholdInfinity(const std::vector<Correspondence>& correspondences,
