@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "api/convert.h"
+#include "api/validate.h"
 
 namespace slapse::server {
 namespace {
@@ -144,6 +145,16 @@ bool SessionRunner::MakePipeline(const StreamInfo& info) {
           "");
       return false;
     }
+    // An RTP stream opened before its sender may not know its size yet (0x0).
+    const bool sized = info.width_px > 0 && info.height_px > 0;
+    const Status plausible =
+        sized ? api::ValidateIntrinsicsForImage(pk, info.width_px, info.height_px,
+                                                "intrinsics (against the stream's size)")
+              : Status::Ok();
+    if (!plausible.ok()) {
+      session_->TransitionLocked(v1::Session::FAILED, plausible, "");
+      return false;
+    }
     k = api::IntrinsicsFromProto(pk);
     options = api::PipelineOptionsFromProto(session_->proto.pipeline_options());
   }
@@ -187,6 +198,7 @@ void SessionRunner::Publish(const FrameRecord& frame, const PipelineStep* step) 
     st->set_fps(wall_s > 0 && (frames_ >= 10 || wall_s >= 0.25) ? frames_ / wall_s : 0.0);
     st->set_lag_ms(std::max(0.0, wall_s - frame.timestamp_s) * 1e3);
     st->set_stream_time_s(frame.timestamp_s);
+    session_->no_pose_reason = NoPoseReason(step);
     if (step != nullptr) {
       ++pairs_;
       tracked_ += step->tracking;
@@ -201,6 +213,18 @@ void SessionRunner::Publish(const FrameRecord& frame, const PipelineStep* step) 
     if (e.has_pose()) *e.mutable_pose()->mutable_emit_time() = PreciseNow();
     session_->events->Append(std::move(e));
   }
+}
+
+std::string SessionRunner::NoPoseReason(const PipelineStep* step) const {
+  const std::string seen = std::to_string(frames_) + " frame(s)";
+  if (step == nullptr && pairs_ == 0) {
+    return seen + " but no anchor pair was closed (too few frames, or no two anchor frames)";
+  }
+  if (step != nullptr && !step->note.empty()) {
+    return std::to_string(pairs_ + 1) + " anchor pair(s) but none tracked; the last: " + step->note;
+  }
+  if (step == nullptr) return session_->no_pose_reason;
+  return std::to_string(pairs_ + 1) + " anchor pair(s) but none tracked";
 }
 
 void SessionRunner::ApplyUpdatesLocked(const StepUpdates& u,
