@@ -100,10 +100,17 @@ class FaultCatalogueTest : public ::testing::Test {
 
   // Waits for `name` to end and reads how.
   Outcome EndOf(const std::string& name) {
-    Status watched = client_->Watch(name, 0, [](const v1::SessionEvent&) { return true; });
+    v1::SessionEvent last;
+    Status watched = client_->Watch(name, 0, [&](const v1::SessionEvent& e) {
+      last = e;
+      return true;
+    });
     if (!watched.ok()) return FromStatus(watched);
     auto got = client_->GetSession(name);
     if (!got.ok()) return FromStatus(got.status());
+    // Every ending is a state change in the event log, with the same message.
+    EXPECT_EQ(last.state_change().state(), got->state()) << name;
+    EXPECT_EQ(last.state_change().message(), got->state_message()) << name;
     if (got->state() == v1::Session::FAILED) {
       return {got->state(), static_cast<StatusCode>(got->error().code()), got->error().message()};
     }
@@ -132,7 +139,7 @@ class FaultCatalogueTest : public ::testing::Test {
 
   Outcome Upload(const v1::Session& request, const std::string& bytes) {
     return CreateAndEnd(request,
-                        [&](const std::string& name) { client_->UploadBytes(name, bytes); });
+                        [&](const std::string& name) { (void)client_->UploadBytes(name, bytes); });
   }
 
   // An UploadStream held open by the test: `first` bytes, then `then` runs
@@ -159,6 +166,9 @@ class FaultCatalogueTest : public ::testing::Test {
   }
 
   std::vector<Item> Catalogue();
+  void AddStreamItems(std::vector<Item>* items);
+  void AddUploadItems(std::vector<Item>* items);
+  void AddStateItems(std::vector<Item>* items);
 
   std::string dir_, drive_path_, drive_, target_;
   Intrinsics k_;
@@ -166,26 +176,11 @@ class FaultCatalogueTest : public ::testing::Test {
   std::unique_ptr<SlapseClient> client_;
 };
 
-// The items that CreateSession / ListSessions refuse (INVALID_ARGUMENT).
-void AddRequestItems(const v1::Session& ok, SlapseClient* c, std::vector<Item>* items) {
-  const auto I = v1::Session::STATE_UNSPECIFIED;
-  const auto bad = StatusCode::kInvalidArgument;
-  auto create = [c, ok](std::function<void(v1::Session*)> edit) {
-    return [c, ok, edit] {
-      v1::Session r = ok;
-      edit(&r);
-      return FromStatus(c->CreateSession(r).status());
-    };
-  };
-  auto add = [&](const std::string& input, const std::string& fragment,
-                 std::function<void(v1::Session*)> edit) {
-    items->push_back({input, I, bad, fragment, create(std::move(edit))});
-  };
-  add("pipeline_options.scale_source = 99", "scale_source 99 is not one of UP_TO_SCALE (0)",
-      [](v1::Session* r) {
-        r->mutable_pipeline_options()->set_scale_source(
-            static_cast<v1::PipelineOptions::ScaleSource>(99));
-      });
+// Adds an item whose request is the valid one edited by `edit`.
+using AddFn = std::function<void(const std::string& input, const std::string& fragment,
+                                 std::function<void(v1::Session*)> edit)>;
+
+void AddIntrinsicsItems(const AddFn& add) {
   add("intrinsics cx = 1e9 (width/height given)", "principal point (cx_px 1e+09",
       [](v1::Session* r) {
         r->mutable_intrinsics()->set_cx_px(1e9);
@@ -217,6 +212,14 @@ void AddRequestItems(const v1::Session& ok, SlapseClient* c, std::vector<Item>* 
       [](v1::Session* r) { r->mutable_intrinsics()->set_width_px(-1); });
   add("no intrinsics", "session.intrinsics is required",
       [](v1::Session* r) { r->clear_intrinsics(); });
+}
+
+void AddOptionsItems(const AddFn& add) {
+  add("pipeline_options.scale_source = 99", "scale_source 99 is not one of UP_TO_SCALE (0)",
+      [](v1::Session* r) {
+        r->mutable_pipeline_options()->set_scale_source(
+            static_cast<v1::PipelineOptions::ScaleSource>(99));
+      });
   add("no source", "session.source is required", [](v1::Session* r) { r->clear_upload(); });
   add("eps_h_px = 1000", "pipeline_options.eps_h_px must be in [0, 100]",
       [](v1::Session* r) { r->mutable_pipeline_options()->set_eps_h_px(1000); });
@@ -230,6 +233,9 @@ void AddRequestItems(const v1::Session& ok, SlapseClient* c, std::vector<Item>* 
     r->mutable_pipeline_options()->set_scale_source(v1::PipelineOptions::CAMERA_HEIGHT);
     r->mutable_pipeline_options()->set_camera_height_m(-2);
   });
+}
+
+void AddSourceItems(const AddFn& add) {
   add("rtp_sdp.sdp empty", "rtp_sdp.sdp: required",
       [](v1::Session* r) { r->mutable_rtp_sdp()->set_sdp(""); });
   add("rtp_sdp.sdp 'hello'", "is not '<letter>=<value>'",
@@ -267,6 +273,23 @@ void AddRequestItems(const v1::Session& ok, SlapseClient* c, std::vector<Item>* 
     r->mutable_rtsp_pull()->mutable_reconnect()->set_initial_interval_ms(5000);
     r->mutable_rtsp_pull()->mutable_reconnect()->set_max_interval_ms(1000);
   });
+}
+
+// The items that CreateSession / ListSessions refuse (INVALID_ARGUMENT).
+void AddRequestItems(const v1::Session& ok, SlapseClient* c, std::vector<Item>* items) {
+  const auto I = v1::Session::STATE_UNSPECIFIED;
+  const auto bad = StatusCode::kInvalidArgument;
+  const AddFn add = [&](const std::string& input, const std::string& fragment,
+                        std::function<void(v1::Session*)> edit) {
+    items->push_back({input, I, bad, fragment, [c, ok, edit] {
+                        v1::Session r = ok;
+                        edit(&r);
+                        return FromStatus(c->CreateSession(r).status());
+                      }});
+  };
+  AddIntrinsicsItems(add);
+  AddOptionsItems(add);
+  AddSourceItems(add);
   auto list = [c](int page_size, const std::string& token, int state) {
     return [=] {
       return FromStatus(
@@ -321,7 +344,6 @@ std::vector<Item> FaultCatalogueTest::Catalogue() {
   std::vector<Item> items;
   AddRequestItems(Request(), client_.get(), &items);
   AddNameItems(client_.get(), &items);
-  const auto FAILED = v1::Session::FAILED;
   const auto I = v1::Session::STATE_UNSPECIFIED;
 
   items.push_back({"RTP SDP whose port is in use", I, StatusCode::kFailedPrecondition,
@@ -334,6 +356,16 @@ std::vector<Item> FaultCatalogueTest::Catalogue() {
                      close(fd);
                      return o;
                    }});
+  AddStreamItems(&items);
+  AddUploadItems(&items);
+  AddStateItems(&items);
+  return items;
+}
+
+// Sessions that fail on what their stream shows.
+void FaultCatalogueTest::AddStreamItems(std::vector<Item>* out) {
+  std::vector<Item>& items = *out;
+  const auto FAILED = v1::Session::FAILED;
   items.push_back({"cx = 1e9, size from the stream", FAILED, StatusCode::kInvalidArgument,
                    "principal point (cx_px 1e+09", [this] {
                      v1::Session r = Request();
@@ -357,6 +389,12 @@ std::vector<Item> FaultCatalogueTest::Catalogue() {
                      r.mutable_intrinsics()->set_height_px(1080);
                      return Upload(r, drive_);
                    }});
+}
+
+// Uploads that never start, stall, break off, are damaged or too large.
+void FaultCatalogueTest::AddUploadItems(std::vector<Item>* out) {
+  std::vector<Item>& items = *out;
+  const auto FAILED = v1::Session::FAILED;
   items.push_back({"upload session never uploaded (create idle 1 s)", FAILED,
                    StatusCode::kDeadlineExceeded, "no upload began within 1 s",
                    [this] { return CreateAndEnd(Request()); }});
@@ -406,6 +444,14 @@ std::vector<Item> FaultCatalogueTest::Catalogue() {
          r.mutable_intrinsics()->set_cy_px(120);
          return Upload(r, testing::ReadFileBytes(still));
        }});
+}
+
+// Timeouts of network sources, rpcs refused for the session's state, the
+// CLI's exit codes and capacity.
+void FaultCatalogueTest::AddStateItems(std::vector<Item>* out) {
+  std::vector<Item>& items = *out;
+  const auto FAILED = v1::Session::FAILED;
+  const auto I = v1::Session::STATE_UNSPECIFIED;
   items.push_back({"RTSP push without publisher (start 300 ms)", FAILED,
                    StatusCode::kDeadlineExceeded,
                    "no RTSP publisher sent video within start_timeout_ms=300", [this] {
@@ -427,7 +473,7 @@ std::vector<Item> FaultCatalogueTest::Catalogue() {
                      r.mutable_rtsp_push()->set_path("notupload");
                      auto created = client_->CreateSession(r);
                      Outcome o = FromStatus(client_->UploadBytes(created->name(), "abc").status());
-                     client_->StopSession(created->name());
+                     (void)client_->StopSession(created->name());
                      return o;
                    }});
   items.push_back(
@@ -466,10 +512,9 @@ std::vector<Item> FaultCatalogueTest::Catalogue() {
                        if (created.ok()) held.push_back(created->name());
                        s = created.status();
                      }
-                     for (const std::string& name : held) client_->StopSession(name);
+                     for (const std::string& name : held) (void)client_->StopSession(name);
                      return FromStatus(s);
                    }});
-  return items;
 }
 
 TEST_F(FaultCatalogueTest, EveryItemHasItsStatusAndTheHealthySessionIsUnaffected) {

@@ -77,6 +77,10 @@ void PrintSessionLine(const v1::Session& s) {
               static_cast<long long>(s.stats().tracked_pairs()), s.stats().planes(),
               s.stats().fps(),
               s.error().message().empty() ? "" : "  error: ", s.error().message().c_str());
+  // A finished session without poses says why.
+  if (s.state() == v1::Session::FINISHED && !s.state_message().empty()) {
+    std::printf("%-14s %s\n", "", s.state_message().c_str());
+  }
 }
 
 // `upload` and `watch`: the session ended FAILED.
