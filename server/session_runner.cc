@@ -128,38 +128,45 @@ bool SessionRunner::StartConnection(const StreamInfo& info) {
   return true;
 }
 
+namespace {
+
+// The session's intrinsics against the stream: the size they are for, then
+// their plausibility (api::ValidateIntrinsicsForImage). A stream that does
+// not know its size yet (0x0: RTP opened before its sender) is not checked.
+Status CheckIntrinsicsAgainstStream(const v1::Intrinsics& pk, const StreamInfo& info) {
+  if (info.width_px <= 0 || info.height_px <= 0) return Status::Ok();
+  if ((pk.width_px() != 0 && pk.width_px() != info.width_px) ||
+      (pk.height_px() != 0 && pk.height_px() != info.height_px)) {
+    return InvalidArgumentError("intrinsics are for " + std::to_string(pk.width_px()) + "x" +
+                                std::to_string(pk.height_px()) + " but the stream is " +
+                                std::to_string(info.width_px) + "x" +
+                                std::to_string(info.height_px));
+  }
+  return api::ValidateIntrinsicsForImage(pk, info.width_px, info.height_px,
+                                         "intrinsics (against the stream's size)");
+}
+
+}  // namespace
+
 bool SessionRunner::MakePipeline(const StreamInfo& info) {
   Intrinsics k;
   PipelineOptions options;
   {
     std::lock_guard<std::mutex> lock(session_->mu);
     const v1::Intrinsics& pk = session_->proto.intrinsics();
-    if ((pk.width_px() != 0 && pk.width_px() != info.width_px) ||
-        (pk.height_px() != 0 && pk.height_px() != info.height_px)) {
-      session_->TransitionLocked(
-          v1::Session::FAILED,
-          InvalidArgumentError("intrinsics are for " + std::to_string(pk.width_px()) + "x" +
-                               std::to_string(pk.height_px()) + " but the stream is " +
-                               std::to_string(info.width_px) + "x" +
-                               std::to_string(info.height_px)),
-          "");
-      return false;
-    }
-    // An RTP stream opened before its sender may not know its size yet (0x0).
-    const bool sized = info.width_px > 0 && info.height_px > 0;
-    const Status plausible =
-        sized ? api::ValidateIntrinsicsForImage(pk, info.width_px, info.height_px,
-                                                "intrinsics (against the stream's size)")
-              : Status::Ok();
-    if (!plausible.ok()) {
-      session_->TransitionLocked(v1::Session::FAILED, plausible, "");
+    const Status checked = CheckIntrinsicsAgainstStream(pk, info);
+    if (!checked.ok()) {
+      session_->TransitionLocked(v1::Session::FAILED, checked, "");
       return false;
     }
     k = api::IntrinsicsFromProto(pk);
     options = api::PipelineOptionsFromProto(session_->proto.pipeline_options());
   }
-  k.width_px = info.width_px;
-  k.height_px = info.height_px;
+  // The stream's size when it knows it, else the intrinsics' own (if given).
+  if (info.width_px > 0 && info.height_px > 0) {
+    k.width_px = info.width_px;
+    k.height_px = info.height_px;
+  }
   pipeline_.emplace(k, info.mv_sigma_px(), options);
   first_info_ = info;
   start_ = Clock::now();

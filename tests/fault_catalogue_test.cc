@@ -452,6 +452,27 @@ void FaultCatalogueTest::AddStateItems(std::vector<Item>* out) {
   std::vector<Item>& items = *out;
   const auto FAILED = v1::Session::FAILED;
   const auto I = v1::Session::STATE_UNSPECIFIED;
+  items.push_back(
+      {"RTP with sized intrinsics (320x240 given): waits for its sender, not 'stream is 0x0'",
+       v1::Session::FINISHED, StatusCode::kOk, "receive_timeout_ms=1000", [this] {
+         const int port = testing::FreeRtpPort();
+         v1::Session r = Request();
+         r.mutable_intrinsics()->set_width_px(320);
+         r.mutable_intrinsics()->set_height_px(240);
+         r.mutable_rtp_sdp()->set_sdp(testing::Mpeg2RtpSdp(port));
+         r.mutable_rtp_sdp()->set_start_timeout_ms(10000);
+         r.mutable_rtp_sdp()->set_receive_timeout_ms(1000);
+         Outcome o = CreateAndEnd(r, [&](const std::string&) {
+           // The receiver first (README): send once the port is bound.
+           if (!testing::WaitForLocalPort("udp", port, std::chrono::seconds(5))) return;
+           FfmpegProcess sender({"-re", "-i", drive_path_, "-c", "copy", "-f", "rtp",
+                                 "rtp://127.0.0.1:" + std::to_string(port)});
+           sender.Wait(std::chrono::seconds(15));
+         });
+         // It must have made poses.
+         if (o.message.find("no poses") != std::string::npos) o.code = StatusCode::kUnknown;
+         return o;
+       }});
   items.push_back({"RTSP push without publisher (start 300 ms)", FAILED,
                    StatusCode::kDeadlineExceeded,
                    "no RTSP publisher sent video within start_timeout_ms=300", [this] {
