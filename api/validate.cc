@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 
 #include "api/convert.h"
@@ -12,6 +13,27 @@ namespace slapse::api {
 namespace {
 
 bool Finite(double v) { return std::isfinite(v); }
+
+// "A (1), B (2)" for the valid values of a proto enum.
+template <typename Descriptor>
+std::string EnumValues(const Descriptor* d) {
+  std::string out;
+  for (int i = 0; i < d->value_count(); ++i) {
+    if (!out.empty()) out += ", ";
+    out += d->value(i)->name() + " (" + std::to_string(d->value(i)->number()) + ")";
+  }
+  return out;
+}
+
+std::string Num(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%g", v);
+  return buf;
+}
+
+double FovDeg(int size_px, double f_px) {
+  return 2.0 * std::atan(size_px / (2.0 * f_px)) * 180.0 / M_PI;
+}
 
 }  // namespace
 
@@ -191,12 +213,22 @@ Status ValidateSession(const v1::Session& r) {
     return InvalidArgumentError("session.intrinsics is required (fx_px, fy_px, cx_px, cy_px)");
   }
   SLAPSE_RETURN_IF_ERROR(ValidateIntrinsics(IntrinsicsFromProto(r.intrinsics()), "intrinsics"));
+  const v1::Intrinsics& k = r.intrinsics();
+  if (k.width_px() > 0 && k.height_px() > 0) {
+    SLAPSE_RETURN_IF_ERROR(ValidateIntrinsicsForImage(
+        k, k.width_px(), k.height_px(), "intrinsics (for their width_px x height_px)"));
+  }
   return ValidatePipelineOptions(r.pipeline_options());
 }
 
 Status ValidatePipelineOptions(const v1::PipelineOptions& p) {
   if (!Finite(p.eps_h_px()) || p.eps_h_px() < 0 || p.eps_h_px() > kMaxEpsHPx) {
     return InvalidArgumentError("pipeline_options.eps_h_px must be in [0, 100] px (0 = default)");
+  }
+  if (!v1::PipelineOptions::ScaleSource_IsValid(p.scale_source())) {
+    return InvalidArgumentError("pipeline_options.scale_source " +
+                                std::to_string(p.scale_source()) + " is not one of " +
+                                EnumValues(v1::PipelineOptions::ScaleSource_descriptor()));
   }
   auto positive = [](double v) { return Finite(v) && v > 0; };
   switch (p.scale_source()) {
@@ -218,6 +250,45 @@ Status ValidatePipelineOptions(const v1::PipelineOptions& p) {
       break;
     default:
       break;
+  }
+  return Status::Ok();
+}
+
+Status ValidateListRequest(const v1::ListSessionsRequest& r) {
+  if (r.page_size() < 0) return InvalidArgumentError("page_size must be >= 0 (0 = 50)");
+  if (!v1::Session::State_IsValid(r.state_filter())) {
+    return InvalidArgumentError("state_filter " + std::to_string(r.state_filter()) +
+                                " is not one of " + EnumValues(v1::Session::State_descriptor()));
+  }
+  return Status::Ok();
+}
+
+Status ValidateIntrinsicsForImage(const v1::Intrinsics& k, int w, int h, const std::string& what) {
+  const std::string size = std::to_string(w) + "x" + std::to_string(h);
+  if (!(k.cx_px() >= 0 && k.cx_px() <= w && k.cy_px() >= 0 && k.cy_px() <= h)) {
+    return InvalidArgumentError(what + ": the principal point (cx_px " + Num(k.cx_px()) +
+                                ", cy_px " + Num(k.cy_px()) + ") is outside the " + size +
+                                " image; want 0 <= cx_px <= " + std::to_string(w) +
+                                " and 0 <= cy_px <= " + std::to_string(h));
+  }
+  const double hfov = FovDeg(w, k.fx_px()), vfov = FovDeg(h, k.fy_px());
+  if (!(hfov >= kMinHorizontalFovDeg && hfov <= kMaxFovDeg)) {
+    return InvalidArgumentError(what + ": fx_px " + Num(k.fx_px()) +
+                                " gives a horizontal field "
+                                "of view of " +
+                                Num(hfov) + " deg on the " + size +
+                                " image; want 10 to 170 deg (fx_px about " +
+                                Num(w / (2 * std::tan(85 * M_PI / 180))) + " to " +
+                                Num(w / (2 * std::tan(5 * M_PI / 180))) + ")");
+  }
+  if (!(vfov >= kMinVerticalFovDeg && vfov <= kMaxFovDeg)) {
+    return InvalidArgumentError(what + ": fy_px " + Num(k.fy_px()) +
+                                " gives a vertical field "
+                                "of view of " +
+                                Num(vfov) + " deg on the " + size +
+                                " image; want 5 to 170 deg (fy_px about " +
+                                Num(h / (2 * std::tan(85 * M_PI / 180))) + " to " +
+                                Num(h / (2 * std::tan(2.5 * M_PI / 180))) + ")");
   }
   return Status::Ok();
 }

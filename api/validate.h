@@ -46,6 +46,20 @@ Status ValidateRtspPushPath(const std::string& path);
 // a c= line and an m=video line with a port.
 Status ValidateSdp(const std::string& sdp);
 Status ValidatePipelineOptions(const v1::PipelineOptions& options);
+// ListSessionsRequest: page_size >= 0 and state_filter one of Session.State.
+Status ValidateListRequest(const v1::ListSessionsRequest& request);
+
+// Intrinsics against the image they are for (the rule has this one home):
+// the principal point inside the image (0 <= cx_px <= width_px,
+// 0 <= cy_px <= height_px) and a plausible field of view: horizontal
+// 2*atan(width_px / (2 fx_px)) in [10, 170] deg and vertical
+// 2*atan(height_px / (2 fy_px)) in [5, 170] deg (a wide image's vertical
+// field is narrower). `what` names the intrinsics and where the size came from.
+constexpr double kMinHorizontalFovDeg = 10.0;
+constexpr double kMinVerticalFovDeg = 5.0;
+constexpr double kMaxFovDeg = 170.0;
+Status ValidateIntrinsicsForImage(const v1::Intrinsics& k, int width_px, int height_px,
+                                  const std::string& what);
 
 // The URL with any user:password@ replaced by ***@, for messages.
 std::string RedactUrl(const std::string& url);

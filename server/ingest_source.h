@@ -89,6 +89,11 @@ std::unique_ptr<IngestSource> MakeRtspPushSource(const v1::RtspPush& push,
                                                  const std::string& ingest_url);
 std::unique_ptr<IngestSource> MakeRtpSdpSource(const v1::RtpSdp& rtp);
 
+// RTP/SDP: FAILED_PRECONDITION naming the port if the UDP port of the SDP's
+// m=video line (RTP) or the next one (RTCP) cannot be bound here (in use).
+// At CreateSession and again when the session opens its receiver.
+Status CheckRtpPortsFree(const std::string& sdp);
+
 // RTSP push: the ingest_url of a new session's listener on `host` (a free
 // port of its own) for `path`. UNAVAILABLE if no port is free.
 StatusOr<std::string> RtspPushIngestUrl(const std::string& host, const std::string& path);

@@ -26,9 +26,14 @@ bool Session::TransitionLocked(v1::Session::State state, const Status& why,
     proto.mutable_error()->set_code(static_cast<int>(why.code()));
     proto.mutable_error()->set_message(why.message());
   }
+  std::string text = why.ok() ? message : why.message();
+  if (state == v1::Session::FINISHED && trajectory.empty()) {
+    text += (text.empty() ? "" : "; ") + std::string("no poses: ") + no_pose_reason;
+  }
+  proto.set_state_message(text);
   v1::SessionEvent e;
   e.mutable_state_change()->set_state(state);
-  e.mutable_state_change()->set_message(why.ok() ? message : why.message());
+  e.mutable_state_change()->set_message(text);
   e.mutable_state_change()->set_error_code(static_cast<int>(why.code()));
   events->Append(std::move(e));
   if (IsTerminal(state)) {

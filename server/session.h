@@ -53,6 +53,9 @@ class Session {
   std::vector<v1::Trajectory::Point> trajectory;
   std::map<int, v1::PlaneMap::Plane> planes;
   bool metric = false;
+  // Why the session has no poses yet (the runner keeps it current); a
+  // FINISHED ending with an empty trajectory says it ("no poses: ...").
+  std::string no_pose_reason = "no video frames were received";
 
   // Moves to `state` unless already terminal; appends the StateChange event
   // and, for a terminal state, closes the event log. Call with `mu` held.

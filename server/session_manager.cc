@@ -33,6 +33,7 @@ int SessionManager::ActiveCountLocked() const {
 
 StatusOr<v1::Session> SessionManager::Create(const v1::Session& request) {
   SLAPSE_RETURN_IF_ERROR(api::ValidateSession(request));
+  if (request.has_rtp_sdp()) SLAPSE_RETURN_IF_ERROR(CheckRtpPortsFree(request.rtp_sdp().sdp()));
   std::shared_ptr<Session> s;
   {
     std::lock_guard<std::mutex> lock(mu_);
@@ -48,6 +49,8 @@ StatusOr<v1::Session> SessionManager::Create(const v1::Session& request) {
     UploadQueueOptions q;
     q.capacity_bytes = options_.upload_buffer_bytes;
     q.max_total_bytes = options_.max_upload_bytes;
+    q.start_idle_timeout_ms = options_.create_idle_timeout_ms;
+    q.stall_timeout_ms = options_.upload_stall_timeout_ms;
     s = std::make_shared<Session>("sessions/" + std::to_string(id), options_.event_ring_capacity,
                                   q);
     s->proto = request;
@@ -94,7 +97,7 @@ StatusOr<v1::Session> SessionManager::Get(const std::string& name) const {
 
 StatusOr<v1::ListSessionsResponse> SessionManager::List(
     const v1::ListSessionsRequest& request) const {
-  if (request.page_size() < 0) return InvalidArgumentError("page_size must be >= 0");
+  SLAPSE_RETURN_IF_ERROR(api::ValidateListRequest(request));
   const size_t page_size =
       request.page_size() == 0 ? 50 : std::min<size_t>(request.page_size(), 1000);
   uint64_t after = 0;
@@ -167,11 +170,20 @@ StatusOr<v1::Session> SessionManager::Upload(const std::string& name, std::strin
       return FailedPreconditionError(name + " already received its upload (one per session)");
     }
     s->upload_started = true;
+    s->upload->Start();
     s->TransitionLocked(v1::Session::RUNNING, Status::Ok(), "upload started");
   }
   Status st = s->upload->Write(std::move(first_bytes), cancelled);
   std::string chunk;
   while (st.ok() && next(&chunk)) st = s->upload->Write(std::move(chunk), cancelled);
+  // The client's stream ended: a half-close finishes the upload, a cancelled
+  // rpc (the client went away or cancelled) does not.
+  if ((st.ok() || st.code() == StatusCode::kCancelled) && cancelled()) {
+    st = CancelledError(
+        "the upload ended before the client finished it (the client "
+        "disconnected or cancelled after " +
+        std::to_string(s->upload->total_bytes()) + " bytes)");
+  }
   if (!st.ok()) {
     if (st.code() == StatusCode::kCancelled || st.code() == StatusCode::kResourceExhausted) {
       {

@@ -31,6 +31,12 @@ struct SessionManagerOptions {
   int64_t max_upload_bytes = int64_t{4} << 30;
   // Bytes buffered between an upload and its pipeline (backpressure beyond).
   int64_t upload_buffer_bytes = 4 << 20;
+  // Upload sessions: one CREATED with no upload begun for this long, or
+  // RUNNING with no bytes for upload_stall_timeout_ms, ends FAILED with
+  // DEADLINE_EXCEEDED and frees its worker (0 = never). Network sources have
+  // their own start_timeout_ms / receive_timeout_ms instead.
+  int64_t create_idle_timeout_ms = 10 * 60 * 1000;
+  int64_t upload_stall_timeout_ms = 60 * 1000;
   // Events kept per session for watchers to resume from.
   size_t event_ring_capacity = 4096;
   // RTSP push: the address each session's RTSP listener binds (on a free

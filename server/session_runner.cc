@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "api/convert.h"
+#include "api/validate.h"
 
 namespace slapse::server {
 namespace {
@@ -127,28 +128,45 @@ bool SessionRunner::StartConnection(const StreamInfo& info) {
   return true;
 }
 
+namespace {
+
+// The session's intrinsics against the stream: the size they are for, then
+// their plausibility (api::ValidateIntrinsicsForImage). A stream that does
+// not know its size yet (0x0: RTP opened before its sender) is not checked.
+Status CheckIntrinsicsAgainstStream(const v1::Intrinsics& pk, const StreamInfo& info) {
+  if (info.width_px <= 0 || info.height_px <= 0) return Status::Ok();
+  if ((pk.width_px() != 0 && pk.width_px() != info.width_px) ||
+      (pk.height_px() != 0 && pk.height_px() != info.height_px)) {
+    return InvalidArgumentError("intrinsics are for " + std::to_string(pk.width_px()) + "x" +
+                                std::to_string(pk.height_px()) + " but the stream is " +
+                                std::to_string(info.width_px) + "x" +
+                                std::to_string(info.height_px));
+  }
+  return api::ValidateIntrinsicsForImage(pk, info.width_px, info.height_px,
+                                         "intrinsics (against the stream's size)");
+}
+
+}  // namespace
+
 bool SessionRunner::MakePipeline(const StreamInfo& info) {
   Intrinsics k;
   PipelineOptions options;
   {
     std::lock_guard<std::mutex> lock(session_->mu);
     const v1::Intrinsics& pk = session_->proto.intrinsics();
-    if ((pk.width_px() != 0 && pk.width_px() != info.width_px) ||
-        (pk.height_px() != 0 && pk.height_px() != info.height_px)) {
-      session_->TransitionLocked(
-          v1::Session::FAILED,
-          InvalidArgumentError("intrinsics are for " + std::to_string(pk.width_px()) + "x" +
-                               std::to_string(pk.height_px()) + " but the stream is " +
-                               std::to_string(info.width_px) + "x" +
-                               std::to_string(info.height_px)),
-          "");
+    const Status checked = CheckIntrinsicsAgainstStream(pk, info);
+    if (!checked.ok()) {
+      session_->TransitionLocked(v1::Session::FAILED, checked, "");
       return false;
     }
     k = api::IntrinsicsFromProto(pk);
     options = api::PipelineOptionsFromProto(session_->proto.pipeline_options());
   }
-  k.width_px = info.width_px;
-  k.height_px = info.height_px;
+  // The stream's size when it knows it, else the intrinsics' own (if given).
+  if (info.width_px > 0 && info.height_px > 0) {
+    k.width_px = info.width_px;
+    k.height_px = info.height_px;
+  }
   pipeline_.emplace(k, info.mv_sigma_px(), options);
   first_info_ = info;
   start_ = Clock::now();
@@ -187,6 +205,7 @@ void SessionRunner::Publish(const FrameRecord& frame, const PipelineStep* step) 
     st->set_fps(wall_s > 0 && (frames_ >= 10 || wall_s >= 0.25) ? frames_ / wall_s : 0.0);
     st->set_lag_ms(std::max(0.0, wall_s - frame.timestamp_s) * 1e3);
     st->set_stream_time_s(frame.timestamp_s);
+    session_->no_pose_reason = NoPoseReason(step);
     if (step != nullptr) {
       ++pairs_;
       tracked_ += step->tracking;
@@ -201,6 +220,18 @@ void SessionRunner::Publish(const FrameRecord& frame, const PipelineStep* step) 
     if (e.has_pose()) *e.mutable_pose()->mutable_emit_time() = PreciseNow();
     session_->events->Append(std::move(e));
   }
+}
+
+std::string SessionRunner::NoPoseReason(const PipelineStep* step) const {
+  const std::string seen = std::to_string(frames_) + " frame(s)";
+  if (step == nullptr && pairs_ == 0) {
+    return seen + " but no anchor pair was closed (too few frames, or no two anchor frames)";
+  }
+  if (step != nullptr && !step->note.empty()) {
+    return std::to_string(pairs_ + 1) + " anchor pair(s) but none tracked; the last: " + step->note;
+  }
+  if (step == nullptr) return session_->no_pose_reason;
+  return std::to_string(pairs_ + 1) + " anchor pair(s) but none tracked";
 }
 
 void SessionRunner::ApplyUpdatesLocked(const StepUpdates& u,

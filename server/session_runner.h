@@ -51,6 +51,9 @@ class SessionRunner {
   // publishes the result; false if the session ended.
   bool Feed(FrameRecord frame);
   void Publish(const FrameRecord& frame, const PipelineStep* step);
+  // Why the session has no poses yet, after `step` (null: a frame that
+  // closed no pair). Called before the step is counted.
+  std::string NoPoseReason(const PipelineStep* step) const;
   // With the session's lock held: the snapshots and the events of a step.
   void ApplyUpdatesLocked(const StepUpdates& updates, std::vector<v1::SessionEvent>* events);
   // Ends the session after its stream broke off with `status`.

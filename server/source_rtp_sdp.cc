@@ -1,13 +1,61 @@
 // The RTP/SDP source: RTP packets (UDP) as the client's SDP describes them.
 // RTP has no end-of-stream, so a session that got video FINISHES when
 // none arrived for receive_timeout_ms; none within start_timeout_ms FAILS it.
+#include <netinet/in.h>
+#include <sys/socket.h>
 #include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
 
 #include <cstdlib>
 
 #include "server/ingest_source.h"
 
 namespace slapse::server {
+namespace {
+
+// The port of the SDP's m=video line (validated: 1..65535), or 0.
+int SdpVideoPort(const std::string& sdp) {
+  const size_t at = sdp.find("m=video ");
+  if (at == std::string::npos) return 0;
+  return static_cast<int>(std::strtol(sdp.c_str() + at + 8, nullptr, 10));
+}
+
+// 0 if UDP `port` can be bound on every address, else the errno.
+int TryBindUdp(int port) {
+  const int fd = socket(AF_INET, SOCK_DGRAM, 0);
+  if (fd < 0) return errno;
+  sockaddr_in sa{};
+  sa.sin_family = AF_INET;
+  sa.sin_addr.s_addr = htonl(INADDR_ANY);
+  sa.sin_port = htons(static_cast<uint16_t>(port));
+  const int rc = bind(fd, reinterpret_cast<sockaddr*>(&sa), sizeof(sa));
+  const int err = rc == 0 ? 0 : errno;
+  close(fd);
+  return err;
+}
+
+}  // namespace
+
+Status CheckRtpPortsFree(const std::string& sdp) {
+  const int port = SdpVideoPort(sdp);
+  if (port <= 0) return Status::Ok();  // ValidateSdp has the say
+  for (int p : {port, port + 1}) {
+    if (p > 65535) break;
+    const int err = TryBindUdp(p);
+    if (err == 0) continue;
+    const std::string role = p == port ? "RTP port" : "RTCP port (the RTP port + 1)";
+    return FailedPreconditionError(
+        "rtp_sdp.sdp: UDP " + role + " " + std::to_string(p) + " of the m=video line (" +
+        std::to_string(port) + ") cannot be bound on this server: " + std::strerror(err) +
+        (err == EADDRINUSE ? " (another session or program receives there); pick a free even "
+                             "port in the SDP and send there"
+                           : ""));
+  }
+  return Status::Ok();
+}
+
 namespace {
 
 class RtpSdpSource : public SingleConnectionSource {
@@ -18,6 +66,7 @@ class RtpSdpSource : public SingleConnectionSource {
   // The SDP goes to a private temp file (mkstemp: mode 0600) that is removed
   // once FFmpeg has parsed it; only file, udp and rtp are allowed.
   StatusOr<std::unique_ptr<MvReader>> Open(std::function<bool()> interrupt) override {
+    SLAPSE_RETURN_IF_ERROR(CheckRtpPortsFree(sdp_));
     const char* tmp = std::getenv("TMPDIR");
     std::string path =
         std::string(tmp != nullptr && *tmp != '\0' ? tmp : "/tmp") + "/slapse-sdp-XXXXXX";

@@ -20,6 +20,17 @@ class UploadSource : public SingleConnectionSource {
     return MvReader::Open(std::make_unique<UploadByteSource>(upload_), o);
   }
 
+  // The queue's own reason wins over what the reader made of it (-1 reads
+  // as a damaged stream): an idle timeout, a cancelled or too large upload.
+  std::optional<int> AfterConnection(Session* session, const ConnectionEnd& end) override {
+    const Status reason = upload_->close_reason();
+    if (!reason.ok()) {
+      session->EndStream(reason, EndOfStreamMessage());
+      return std::nullopt;
+    }
+    return SingleConnectionSource::AfterConnection(session, end);
+  }
+
  protected:
   // Never called: an upload has no deadline.
   Ending TimedOut(int64_t) const override { return {}; }

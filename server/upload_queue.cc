@@ -2,9 +2,20 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <cstring>
 
 namespace slapse::server {
+
+UploadQueue::UploadQueue(UploadQueueOptions options)
+    : options_(options), created_(Clock::now()), last_write_(created_) {}
+
+void UploadQueue::Start() {
+  std::lock_guard<std::mutex> lock(mu_);
+  started_ = true;
+  last_write_ = Clock::now();
+  readable_.notify_all();  // the waiting reader takes the stall deadline
+}
 
 Status UploadQueue::Write(std::string bytes, const std::function<bool()>& cancelled) {
   std::unique_lock<std::mutex> lock(mu_);
@@ -26,6 +37,7 @@ Status UploadQueue::Write(std::string bytes, const std::function<bool()>& cancel
   }
   if (closed_) return close_reason_;
   if (n == 0) return Status::Ok();
+  last_write_ = Clock::now();
   buffered_ += n;
   total_ += n;
   chunks_.push_back(std::move(bytes));
@@ -41,6 +53,10 @@ void UploadQueue::Finish() {
 
 void UploadQueue::Close(Status reason) {
   std::lock_guard<std::mutex> lock(mu_);
+  CloseLocked(std::move(reason));
+}
+
+void UploadQueue::CloseLocked(Status reason) {
   if (closed_) return;
   closed_ = true;
   close_reason_ = reason.ok() ? CancelledError("the session ended") : std::move(reason);
@@ -50,9 +66,44 @@ void UploadQueue::Close(Status reason) {
   writable_.notify_all();
 }
 
+Status UploadQueue::IdleTimeoutErrorLocked() const {
+  const auto seconds = [](int64_t ms) {
+    char buf[32];
+    std::snprintf(buf, sizeof(buf), "%g", ms / 1000.0);
+    return std::string(buf);
+  };
+  if (started_) {
+    return Status(StatusCode::kDeadlineExceeded,
+                  "the upload stalled: no bytes arrived for " + seconds(options_.stall_timeout_ms) +
+                      " s (serve --upload-stall-timeout-s); the session's worker is freed");
+  }
+  return Status(StatusCode::kDeadlineExceeded,
+                "no upload began within " + seconds(options_.start_idle_timeout_ms) +
+                    " s of the session's creation (serve --create-idle-timeout-s); the "
+                    "session's worker is freed");
+}
+
+UploadQueue::Clock::time_point UploadQueue::IdleDeadlineLocked() const {
+  const int64_t ms = started_ ? options_.stall_timeout_ms : options_.start_idle_timeout_ms;
+  if (ms <= 0) return Clock::time_point::max();
+  return (started_ ? last_write_ : created_) + std::chrono::milliseconds(ms);
+}
+
 int UploadQueue::Read(uint8_t* buf, int size) {
   std::unique_lock<std::mutex> lock(mu_);
-  readable_.wait(lock, [&] { return closed_ || finished_ || !chunks_.empty(); });
+  auto ready = [&] { return closed_ || finished_ || !chunks_.empty(); };
+  while (!ready()) {
+    const Clock::time_point deadline = IdleDeadlineLocked();
+    if (Clock::now() >= deadline) {
+      CloseLocked(IdleTimeoutErrorLocked());
+      break;
+    }
+    if (deadline == Clock::time_point::max()) {
+      readable_.wait(lock);
+    } else {
+      readable_.wait_until(lock, deadline);
+    }
+  }
   if (closed_) return -1;
   if (chunks_.empty()) return 0;  // finished and drained
   int copied = 0;
@@ -75,6 +126,15 @@ int UploadQueue::Read(uint8_t* buf, int size) {
 int64_t UploadQueue::total_bytes() const {
   std::lock_guard<std::mutex> lock(mu_);
   return total_;
+}
+
+}  // namespace slapse::server
+
+namespace slapse::server {
+
+Status UploadQueue::close_reason() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return closed_ ? close_reason_ : Status::Ok();
 }
 
 }  // namespace slapse::server

@@ -5,6 +5,7 @@
 // one consumer are expected.
 #pragma once
 
+#include <chrono>
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
@@ -23,11 +24,21 @@ struct UploadQueueOptions {
   int64_t capacity_bytes = 4 << 20;
   // Total bytes one upload may send; more is RESOURCE_EXHAUSTED. 0 = no limit.
   int64_t max_total_bytes = 0;
+  // Idle timeouts, enforced while the reader waits for bytes (0 = none):
+  // no Start() within start_idle_timeout_ms of the queue's creation (the
+  // session was created but its upload never began), or no bytes for
+  // stall_timeout_ms once started (a stalled upload). Either closes the queue
+  // with DEADLINE_EXCEEDED and a message naming the `serve` flag.
+  int64_t start_idle_timeout_ms = 0;
+  int64_t stall_timeout_ms = 0;
 };
 
 class UploadQueue {
  public:
-  explicit UploadQueue(UploadQueueOptions options) : options_(options) {}
+  explicit UploadQueue(UploadQueueOptions options);
+
+  // The upload began (its rpc arrived): the stall timeout applies from now.
+  void Start();
 
   // Appends bytes, blocking while the buffer is full. Returns OK once queued;
   // RESOURCE_EXHAUSTED past max_total_bytes (the queue is then closed with
@@ -45,8 +56,16 @@ class UploadQueue {
   int Read(uint8_t* buf, int size);
 
   int64_t total_bytes() const;
+  // Why the queue was closed (OK while open or closed with OK).
+  Status close_reason() const;
 
  private:
+  using Clock = std::chrono::steady_clock;
+  void CloseLocked(Status reason);
+  // When the waiting reader gives up (Clock::time_point::max(): never).
+  Clock::time_point IdleDeadlineLocked() const;
+  Status IdleTimeoutErrorLocked() const;
+
   const UploadQueueOptions options_;
   mutable std::mutex mu_;
   std::condition_variable readable_, writable_;
@@ -55,6 +74,8 @@ class UploadQueue {
   int64_t buffered_ = 0, total_ = 0;
   bool finished_ = false;
   bool closed_ = false;
+  bool started_ = false;
+  Clock::time_point created_, last_write_;
   Status close_reason_;
 };
 

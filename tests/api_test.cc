@@ -211,6 +211,63 @@ TEST(ValidateTest, SessionRequest) {
   EXPECT_EQ(api::ValidateSession(s).message(), "pipeline_options.speed_mps must be > 0 for SPEED");
 }
 
+TEST(ValidateTest, EnumsOutOfRangeNameTheFieldAndTheValues) {
+  v1::Session s = ValidUpload();
+  s.mutable_pipeline_options()->set_scale_source(static_cast<v1::PipelineOptions::ScaleSource>(99));
+  EXPECT_EQ(api::ValidateSession(s).message(),
+            "pipeline_options.scale_source 99 is not one of UP_TO_SCALE (0), FIRST_STEP (1), "
+            "SPEED (2), CAMERA_HEIGHT (3)");
+  v1::ListSessionsRequest list;
+  EXPECT_TRUE(api::ValidateListRequest(list).ok());
+  list.set_state_filter(static_cast<v1::Session::State>(42));
+  const Status st = api::ValidateListRequest(list);
+  EXPECT_EQ(st.code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(st.message(),
+            "state_filter 42 is not one of STATE_UNSPECIFIED (0), CREATED (1), RUNNING (2), "
+            "FINISHED (3), FAILED (4), STOPPED (5)");
+  list.set_state_filter(v1::Session::FAILED);
+  list.set_page_size(-1);
+  EXPECT_EQ(api::ValidateListRequest(list).code(), StatusCode::kInvalidArgument);
+}
+
+TEST(ValidateTest, IntrinsicsAgainstTheImage) {
+  v1::Intrinsics k;
+  k.set_fx_px(500);
+  k.set_fy_px(500);
+  k.set_cx_px(320);
+  k.set_cy_px(240);
+  EXPECT_TRUE(api::ValidateIntrinsicsForImage(k, 640, 480, "k").ok());
+  // The edges are inside; 90 deg fisheye-ish fx = w / 2 too.
+  k.set_cx_px(640);
+  k.set_fx_px(320);
+  EXPECT_TRUE(api::ValidateIntrinsicsForImage(k, 640, 480, "k").ok());
+  k.set_cx_px(1e9);
+  Status st = api::ValidateIntrinsicsForImage(k, 640, 480, "k");
+  EXPECT_EQ(st.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(st.message().find("principal point (cx_px 1e+09, cy_px 240) is outside the 640x480"),
+            std::string::npos)
+      << st.message();
+  k.set_cx_px(320);
+  k.set_fx_px(1e-300);
+  st = api::ValidateIntrinsicsForImage(k, 640, 480, "k");
+  EXPECT_NE(st.message().find("fx_px 1e-300 gives a horizontal field of view of 180 deg"),
+            std::string::npos)
+      << st.message();
+  k.set_fx_px(1e5);  // 0.37 deg
+  EXPECT_EQ(api::ValidateIntrinsicsForImage(k, 640, 480, "k").code(), StatusCode::kInvalidArgument);
+  k.set_fx_px(500);
+  k.set_fy_px(1e5);
+  st = api::ValidateIntrinsicsForImage(k, 640, 480, "k");
+  EXPECT_NE(st.message().find("vertical field of view"), std::string::npos) << st.message();
+  // At create time only when the size is given.
+  v1::Session s = ValidUpload();
+  s.mutable_intrinsics()->set_cx_px(1e9);
+  EXPECT_TRUE(api::ValidateSession(s).ok());
+  s.mutable_intrinsics()->set_width_px(640);
+  s.mutable_intrinsics()->set_height_px(480);
+  EXPECT_EQ(api::ValidateSession(s).code(), StatusCode::kInvalidArgument);
+}
+
 TEST(ValidateTest, RtspUrlAndRedaction) {
   EXPECT_TRUE(api::ValidateRtspUrl("rtsp://cam:554/1").ok());
   EXPECT_TRUE(api::ValidateRtspUrl("rtsps://[::1]:8554/a").ok());

@@ -13,6 +13,7 @@
 
 #include "server/ingest_source.h"
 #include "server/session.h"
+#include "server/upload_queue.h"
 #include "server/worker_pool.h"
 
 namespace slapse::server {
@@ -37,7 +38,10 @@ TEST(SessionTest, EndStreamFinishesAtTheEndAndFailsOtherwise) {
   EXPECT_EQ(s->Snapshot().state(), v1::Session::FINISHED);
   const auto events = AllEvents(*s);
   ASSERT_EQ(events.size(), 2u);
-  EXPECT_EQ(events[1].state_change().message(), "the stream ended");
+  // No poses: the final message says why.
+  EXPECT_EQ(events[1].state_change().message(),
+            "the stream ended; no poses: no video frames were received");
+  EXPECT_EQ(s->Snapshot().state_message(), events[1].state_change().message());
 
   s = NewSession();
   s->EndStream(UnavailableError("gone"), "unused");
@@ -59,6 +63,54 @@ TEST(SessionTest, TheUploadsOwnErrorWinsAndStopWinsOverAll) {
   // Terminal states are final.
   s->Transition(v1::Session::RUNNING, Status::Ok());
   EXPECT_EQ(s->Snapshot().state(), v1::Session::STOPPED);
+}
+
+TEST(SessionTest, AFinishWithoutPosesSaysTheRunnersReason) {
+  auto s = NewSession();
+  s->no_pose_reason = "3 anchor pair(s) but none tracked; the last: no plane extracted";
+  s->EndStream(OutOfRangeError("eof"), "the stream ended");
+  EXPECT_EQ(s->Snapshot().state_message(),
+            "the stream ended; no poses: 3 anchor pair(s) but none tracked; the last: no plane "
+            "extracted");
+  // With poses the message is the source's alone.
+  s = NewSession();
+  s->trajectory.emplace_back();
+  s->EndStream(OutOfRangeError("eof"), "the stream ended");
+  EXPECT_EQ(s->Snapshot().state_message(), "the stream ended");
+}
+
+// The reader gives up on an upload that never began or stalled; the reason
+// names the serve flag. Bytes in time keep it alive.
+TEST(UploadQueueTest, IdleTimeoutsCloseWithDeadlineExceeded) {
+  UploadQueueOptions o;
+  o.start_idle_timeout_ms = 50;
+  o.stall_timeout_ms = 50;
+  UploadQueue never(o);
+  uint8_t buf[16];
+  EXPECT_EQ(never.Read(buf, sizeof(buf)), -1);
+  EXPECT_EQ(never.close_reason().code(), StatusCode::kDeadlineExceeded);
+  EXPECT_NE(never.close_reason().message().find("no upload began within 0.05 s"), std::string::npos)
+      << never.close_reason().message();
+  EXPECT_EQ(never.Write("late", nullptr).code(), StatusCode::kDeadlineExceeded);
+
+  UploadQueue stalled(o);
+  stalled.Start();
+  ASSERT_TRUE(stalled.Write("abcd", nullptr).ok());
+  EXPECT_EQ(stalled.Read(buf, sizeof(buf)), 4);
+  EXPECT_EQ(stalled.Read(buf, sizeof(buf)), -1);
+  EXPECT_NE(
+      stalled.close_reason().message().find("the upload stalled: no bytes arrived for 0.05 s"),
+      std::string::npos)
+      << stalled.close_reason().message();
+
+  // No timeouts configured: a finished queue reads to its end.
+  UploadQueue plain(UploadQueueOptions{});
+  plain.Start();
+  ASSERT_TRUE(plain.Write("ab", nullptr).ok());
+  plain.Finish();
+  EXPECT_EQ(plain.Read(buf, sizeof(buf)), 2);
+  EXPECT_EQ(plain.Read(buf, sizeof(buf)), 0);
+  EXPECT_TRUE(plain.close_reason().ok());
 }
 
 TEST(SessionTest, StopWakesAWait) {
@@ -120,6 +172,7 @@ TEST(IngestSourceTest, RtspPushEndsWithThePublisher) {
   end.opened = true;
   end.status = OutOfRangeError("eof");
   end.frames = end.session_frames = 10;
+  s->trajectory.emplace_back();  // it had poses (else the message says why not)
   EXPECT_FALSE(source->AfterConnection(s.get(), end).has_value());
   EXPECT_EQ(s->Snapshot().state(), v1::Session::FINISHED);
   const auto events = AllEvents(*s);

@@ -77,7 +77,14 @@ void PrintSessionLine(const v1::Session& s) {
               static_cast<long long>(s.stats().tracked_pairs()), s.stats().planes(),
               s.stats().fps(),
               s.error().message().empty() ? "" : "  error: ", s.error().message().c_str());
+  // A finished session without poses says why.
+  if (s.state() == v1::Session::FINISHED && !s.state_message().empty()) {
+    std::printf("%-14s %s\n", "", s.state_message().c_str());
+  }
 }
+
+// `upload` and `watch`: the session ended FAILED.
+constexpr int kExitSessionFailed = 3;
 
 }  // namespace
 
@@ -104,21 +111,38 @@ int RunServe(int argc, char** argv) {
   app.add_option("--event-ring", ring, "events kept per session for resuming watchers")
       ->type_name("N")
       ->capture_default_str();
+  int64_t create_idle_s = o.sessions.create_idle_timeout_ms / 1000;
+  int64_t stall_s = o.sessions.upload_stall_timeout_ms / 1000;
+  app.add_option("--create-idle-timeout-s", create_idle_s,
+                 "an upload session whose upload has not begun this long after its creation "
+                 "ends FAILED (DEADLINE_EXCEEDED), freeing its worker (0: never)")
+      ->type_name("S")
+      ->capture_default_str();
+  app.add_option("--upload-stall-timeout-s", stall_s,
+                 "an upload that sends no bytes for this long ends its session FAILED "
+                 "(DEADLINE_EXCEEDED), freeing its worker (0: never)")
+      ->type_name("S")
+      ->capture_default_str();
   app.add_option("--rtsp-host", o.sessions.rtsp_push_host,
                  "address RTSP push listeners bind and advertise")
       ->type_name("IPV4")
       ->capture_default_str();
   if (int rc = ParseOrExit(cl, argc, argv, 0); rc >= 0) return rc;
-  for (const Status& s : {CheckRange("port", port, int64_t{0}, int64_t{65535}),
-                          CheckRange("max-sessions", max_sessions, int64_t{1}, int64_t{1024}),
-                          CheckRange("max-upload-mb", max_upload_mb, int64_t{0}, int64_t{1} << 30),
-                          CheckRange("event-ring", ring, int64_t{1}, int64_t{1} << 24)}) {
+  for (const Status& s :
+       {CheckRange("port", port, int64_t{0}, int64_t{65535}),
+        CheckRange("max-sessions", max_sessions, int64_t{1}, int64_t{1024}),
+        CheckRange("max-upload-mb", max_upload_mb, int64_t{0}, int64_t{1} << 30),
+        CheckRange("event-ring", ring, int64_t{1}, int64_t{1} << 24),
+        CheckRange("create-idle-timeout-s", create_idle_s, int64_t{0}, int64_t{1} << 31),
+        CheckRange("upload-stall-timeout-s", stall_s, int64_t{0}, int64_t{1} << 31)}) {
     if (!s.ok()) return Fail("serve", s.message(), 2);
   }
   o.port = static_cast<int>(port);
   o.sessions.max_sessions = static_cast<int>(max_sessions);
   o.sessions.max_upload_bytes = max_upload_mb << 20;
   o.sessions.event_ring_capacity = static_cast<size_t>(ring);
+  o.sessions.create_idle_timeout_ms = create_idle_s * 1000;
+  o.sessions.upload_stall_timeout_ms = stall_s * 1000;
 
   // Block the shutdown signals before gRPC starts its threads; wait for them below.
   sigset_t signals;
@@ -291,19 +315,36 @@ int RunCreate(int argc, char** argv) {
 }
 
 int RunUpload(int argc, char** argv) {
-  CommandLine cl("upload", "SESSION FILE   (sends FILE as the session's stream)", "SESSION FILE");
+  CommandLine cl("upload",
+                 "SESSION FILE   (sends FILE as the session's stream; exit status 0: sent, 1: "
+                 "the upload failed, 2: usage, 3: the session is FAILED)",
+                 "SESSION FILE");
   std::string server;
   AddServerFlag(&cl, &server);
   if (int rc = ParseOrExit(cl, argc, argv, 2); rc >= 0) return rc;
-  auto session = Connect(server)->UploadFile(cl.positional()[0], cl.positional()[1]);
-  if (!session.ok()) return Fail("upload", session.status().ToString());
+  auto client = Connect(server);
+  auto session = client->UploadFile(cl.positional()[0], cl.positional()[1]);
+  if (!session.ok()) {
+    // The rpc carries the session's own error when the session failed.
+    auto now = client->GetSession(cl.positional()[0]);
+    const bool failed = now.ok() && now->state() == v1::Session::FAILED;
+    return Fail("upload", session.status().ToString(), failed ? kExitSessionFailed : 1);
+  }
   PrintSessionLine(*session);
+  if (session->state() == v1::Session::FAILED) {
+    return Fail("upload", "the session is FAILED: " + session->error().message(),
+                kExitSessionFailed);
+  }
   return 0;
 }
 
 int RunWatch(int argc, char** argv) {
-  CommandLine cl("watch", "SESSION [options]   (until the session ends; resume with --after)",
+  CommandLine cl("watch",
+                 "SESSION [options]   (until the session ends; resume with --after; exit status "
+                 "0: the session ended FINISHED or STOPPED, 1: the watch failed, 2: usage, 3: "
+                 "the session ended FAILED)",
                  "SESSION");
+  v1::StateChange last_state;
   std::string server;
   AddServerFlag(&cl, &server);
   int64_t after = 0;
@@ -316,7 +357,8 @@ int RunWatch(int argc, char** argv) {
   if (Status s = CheckRange("after", after, int64_t{0}, INT64_MAX); !s.ok()) {
     return Fail("watch", s.message(), 2);
   }
-  Status s = Connect(server)->Watch(
+  auto client = Connect(server);
+  Status s = client->Watch(
       cl.positional()[0], static_cast<uint64_t>(after), [&](const v1::SessionEvent& e) {
         if (json) {
           std::printf("%s\n", Json(e).c_str());
@@ -343,6 +385,7 @@ int RunWatch(int argc, char** argv) {
                       static_cast<unsigned long long>(e.sequence()), r.attempt(), r.max_attempts(),
                       r.delay_ms(), r.reason().c_str());
         } else if (e.has_state_change()) {
+          last_state = e.state_change();
           std::printf("%6llu state  %s  %s\n", static_cast<unsigned long long>(e.sequence()),
                       StateName(e.state_change().state()), e.state_change().message().c_str());
         }
@@ -350,6 +393,17 @@ int RunWatch(int argc, char** argv) {
         return true;
       });
   if (!s.ok()) return Fail("watch", s.ToString());
+  if (last_state.state() == v1::Session::STATE_UNSPECIFIED) {
+    // Resumed after the final event: the session says how it ended.
+    auto now = client->GetSession(cl.positional()[0]);
+    if (now.ok()) {
+      last_state.set_state(now->state());
+      last_state.set_message(now->state_message());
+    }
+  }
+  if (last_state.state() == v1::Session::FAILED) {
+    return Fail("watch", "the session ended FAILED: " + last_state.message(), kExitSessionFailed);
+  }
   return 0;
 }
 
@@ -357,7 +411,8 @@ int RunList(int argc, char** argv) {
   CommandLine cl("list", "[options]");
   std::string server, state_name;
   AddServerFlag(&cl, &server);
-  cl.app().add_option("--state", state_name, "only CREATED, RUNNING, FINISHED, FAILED or STOPPED")
+  cl.app()
+      .add_option("--state", state_name, "only CREATED, RUNNING, FINISHED, FAILED or STOPPED")
       ->type_name("STATE");
   if (int rc = ParseOrExit(cl, argc, argv, 0); rc >= 0) return rc;
   v1::Session::State state = v1::Session::STATE_UNSPECIFIED;
