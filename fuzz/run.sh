@@ -2,7 +2,7 @@
 # Runs every libFuzzer harness in fuzz/ for SECONDS each (docs/FUZZING.md).
 #   bash fuzz/run.sh SECONDS [HARNESS ...]     e.g. bash fuzz/run.sh 60
 # Builds build-fuzz/ (clang-14, -DSLAPSE_FUZZ=ON) if needed. Each harness runs
-# with one job and one worker, from its seeds in fuzz/corpus/<name> plus the
+# in one process (no -jobs: one core each), from its seeds in fuzz/corpus/<name> plus the
 # corpus it grew in earlier runs (build-fuzz/fuzz-work/<name>/corpus). Prints
 # per harness: executions, exec/s, coverage (cov = edges, ft = features) and
 # the crashes / leaks / UB / timeouts found (artifacts are kept in
@@ -39,7 +39,7 @@ run_one() {
   rm -f "$work"/{crash,leak,timeout,oom,slow-unit}-* "$work/log"
   # shellcheck disable=SC2046
   ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-    "$BUILD_DIR/fuzz/fuzz_$name" -max_total_time="$SECONDS_EACH" -jobs=1 -workers=1 \
+    "$BUILD_DIR/fuzz/fuzz_$name" -max_total_time="$SECONDS_EACH" \
     -print_final_stats=1 -artifact_prefix="$work/" $(flags_for "$name") \
     "$work/corpus" "fuzz/corpus/$name" > "$work/log" 2>&1
   echo $? > "$work/rc"
