@@ -14,6 +14,8 @@
 #include <cstdlib>
 #include <string>
 
+#include <google/protobuf/stubs/logging.h>
+
 #include "api/convert.h"
 #include "api/validate.h"
 #include "core/common/camera.h"
@@ -28,6 +30,12 @@ void Check(bool ok, const char* what) {
 }
 
 }  // namespace
+
+extern "C" int LLVMFuzzerInitialize(int*, char***) {
+  // Parsing refuses strings with invalid UTF-8 and logs each one: quiet.
+  google::protobuf::SetLogHandler(nullptr);
+  return 0;
+}
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   slapse::v1::Session request;
