@@ -27,6 +27,9 @@ PACKAGES=(
   # tsdemux + mpegvideoparse are in plugins-bad, rtpmpvpay in plugins-good.
   python3-gi gir1.2-gst-rtsp-server-1.0
   gstreamer1.0-plugins-base gstreamer1.0-plugins-good gstreamer1.0-plugins-bad
+  # fuzzing (fuzz/, docs/FUZZING.md): clang with libFuzzer + ASan/UBSan runtimes,
+  # llvm-symbolizer for readable stacks
+  clang-14 libclang-rt-14-dev llvm-14
 )
 
 missing=()

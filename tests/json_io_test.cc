@@ -143,5 +143,36 @@ TEST_F(JsonFiles, IntrinsicsFileErrorsNameFileAndKey) {
             StatusCode::kNotFound);
 }
 
+// Found by fuzz/fuzz_intrinsics: a number beyond a double made nlohmann throw
+// out_of_range (not parse_error), which escaped and terminated the program.
+TEST_F(JsonFiles, NumberBeyondDoubleIsAnErrorNotACrash) {
+  const std::string path =
+      Write("big.json", "{\"fx_px\": 8e822, \"fy_px\": 500, \"cx_px\": 1, \"cy_px\": 1}");
+  auto doc = ReadJsonFile(path);
+  ASSERT_FALSE(doc.ok());
+  EXPECT_EQ(doc.status().code(), StatusCode::kDataLoss);
+  EXPECT_NE(doc.status().message().find(path + ": not valid JSON"), std::string::npos)
+      << doc.status().message();
+  auto k = ReadIntrinsicsJson(path);
+  ASSERT_FALSE(k.ok());
+  EXPECT_EQ(k.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_FALSE(ParseIntrinsicsJson("{\"fx_px\": -1e400}", "mem").ok());
+}
+
+// The in-memory reader the fuzz harness uses agrees with the file reader.
+TEST_F(JsonFiles, IntrinsicsFromTextMatchFile) {
+  const std::string text = "{\"fx_px\": 500, \"fy_px\": 400, \"cx_px\": 319.5, \"cy_px\": 239.5, "
+                           "\"width_px\": 640, \"height_px\": 480}";
+  auto k = ParseIntrinsicsJson(text, "k");
+  ASSERT_TRUE(k.ok()) << k.status().ToString();
+  EXPECT_EQ(k->fy_px, 400);
+  EXPECT_EQ(k->width_px, 640);
+  auto from_file = ReadIntrinsicsJson(Write("k.json", text));
+  ASSERT_TRUE(from_file.ok());
+  EXPECT_EQ(from_file->cy_px, k->cy_px);
+  EXPECT_EQ(ParseIntrinsicsJson("[1, 2]", "k").status().message(),
+            "intrinsics: k: not a JSON object");
+}
+
 }  // namespace
 }  // namespace slapse

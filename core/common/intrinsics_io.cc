@@ -8,30 +8,44 @@
 
 namespace slapse {
 
-StatusOr<Intrinsics> ReadIntrinsicsJson(const std::string& path) {
-  if (!std::filesystem::exists(path)) return NotFoundError("cannot read intrinsics file '" + path + "'");
-  auto doc = ReadJsonFile(path);
-  if (!doc.ok()) return InvalidArgumentError("intrinsics file: " + doc.status().message());
-  const std::string where = "intrinsics file '" + path + "'";
+namespace {
+
+// The intrinsics in a parsed intrinsics object; `where` names it in messages.
+StatusOr<Intrinsics> IntrinsicsFromJson(const Json& doc, const std::string& where) {
   Intrinsics k;
   for (const auto& [key, value] : {std::pair<const char*, double*>{"fx_px", &k.fx_px},
                                    {"fy_px", &k.fy_px},
                                    {"cx_px", &k.cx_px},
                                    {"cy_px", &k.cy_px}}) {
-    if (Status s = GetNumber(*doc, key, where, value); !s.ok()) {
+    if (Status s = GetNumber(doc, key, where, value); !s.ok()) {
       return InvalidArgumentError(s.message());
     }
   }
   // Optional: the size the intrinsics are for (0 = any stream).
   for (const auto& [key, value] : {std::pair<const char*, int*>{"width_px", &k.width_px},
                                    {"height_px", &k.height_px}}) {
-    if (!doc->contains(key)) continue;
-    if (Status s = GetInt(*doc, key, where, value); !s.ok()) {
+    if (!doc.contains(key)) continue;
+    if (Status s = GetInt(doc, key, where, value); !s.ok()) {
       return InvalidArgumentError(s.message());
     }
   }
   SLAPSE_RETURN_IF_ERROR(ValidateIntrinsics(k, where));
   return k;
+}
+
+}  // namespace
+
+StatusOr<Intrinsics> ReadIntrinsicsJson(const std::string& path) {
+  if (!std::filesystem::exists(path)) return NotFoundError("cannot read intrinsics file '" + path + "'");
+  auto doc = ReadJsonFile(path);
+  if (!doc.ok()) return InvalidArgumentError("intrinsics file: " + doc.status().message());
+  return IntrinsicsFromJson(*doc, "intrinsics file '" + path + "'");
+}
+
+StatusOr<Intrinsics> ParseIntrinsicsJson(const std::string& text, const std::string& where) {
+  auto doc = ParseJsonText(text, where);
+  if (!doc.ok()) return InvalidArgumentError("intrinsics: " + doc.status().message());
+  return IntrinsicsFromJson(*doc, where);
 }
 
 StatusOr<Intrinsics> ParseIntrinsicsSpec(const std::string& spec, int width_px, int height_px) {

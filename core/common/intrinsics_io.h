@@ -12,6 +12,10 @@ namespace slapse {
 // optionally width_px, height_px (the simulator's intrinsics.json).
 StatusOr<Intrinsics> ReadIntrinsicsJson(const std::string& path);
 
+// The same from the text of such a file held in memory; `where` names it in
+// messages (e.g. "intrinsics file 'k.json'").
+StatusOr<Intrinsics> ParseIntrinsicsJson(const std::string& text, const std::string& where);
+
 // Parses a command-line intrinsics spec for a width x height stream:
 //   "FILE.json"         as ReadIntrinsicsJson
 //   "fx,fy,cx,cy"       pixels, principal point in the pixel-centre convention

@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 
 namespace slapse {
 namespace {
@@ -87,13 +88,20 @@ StatusOr<Json> ReadJsonFile(const std::string& path) {
   if (!std::filesystem::exists(path)) return NotFoundError("missing " + path);
   std::ifstream in(path);
   if (!in) return NotFoundError("cannot read " + path);
+  std::stringstream text;
+  text << in.rdbuf();
+  return ParseJsonText(text.str(), path);
+}
+
+StatusOr<Json> ParseJsonText(const std::string& text, const std::string& where) {
   Json doc;
   try {
-    doc = Json::parse(in);
-  } catch (const Json::parse_error& e) {
-    return DataLossError(path + ": not valid JSON: " + e.what());
+    doc = Json::parse(text);
+  } catch (const Json::exception& e) {
+    // parse_error, and out_of_range for a number beyond a double ("1e999").
+    return DataLossError(where + ": not valid JSON: " + e.what());
   }
-  if (!doc.is_object()) return DataLossError(path + ": not a JSON object");
+  if (!doc.is_object()) return DataLossError(where + ": not a JSON object");
   return doc;
 }
 

@@ -52,6 +52,10 @@ std::string DumpJsonLine(const Json& doc, const NumberFormat& format);
 // with nlohmann's reason) if it is not JSON or not an object.
 StatusOr<Json> ReadJsonFile(const std::string& path);
 
+// Parses `text` (a whole document held in memory): DATA_LOSS naming `where`
+// (e.g. the file) with nlohmann's reason if it is not JSON or not an object.
+StatusOr<Json> ParseJsonText(const std::string& text, const std::string& where);
+
 // Member `key` of object `obj`; `where` names the object in messages
 // ("/d/planes.json: planes[3]"). DATA_LOSS if missing or of the wrong type.
 Status GetNumber(const Json& obj, const std::string& key, const std::string& where, double* out);
