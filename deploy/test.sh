@@ -5,8 +5,9 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash deploy/install-deps.sh
 bash deploy/build.sh -DSLAPSE_BUILD_TESTS=ON
-ctest --test-dir build --output-on-failure --no-tests=error -j "$(nproc)" --timeout 600
 # Fuzz smoke (docs/FUZZING.md): every libFuzzer harness for FUZZ_SECONDS
 # (default 60) in a clang build tree of its own, two at a time; fails on any
 # crash, leak, UB report or invariant violation.
 PARALLEL=2 bash fuzz/run.sh "${FUZZ_SECONDS:-60}"
+# The test suite last, so its summary closes the output.
+ctest --test-dir build --output-on-failure --no-tests=error -j "$(nproc)" --timeout 600
