@@ -1,5 +1,7 @@
 #include "core/pipeline/update_stream.h"
 
+#include <cstddef>
+
 namespace slapse {
 
 StepUpdates UpdateStream::Next(const Pipeline& pipeline, const PipelineStep& step) {
@@ -20,14 +22,9 @@ StepUpdates UpdateStream::Next(const Pipeline& pipeline, const PipelineStep& ste
     out.plane_map = &map;
     points_sent_ = 0;
   }
-  const auto& trajectory = pipeline.trajectory();
-  for (size_t i = points_sent_; i < trajectory.size(); ++i) {
-    TimedPose p;
-    p.index = trajectory[i].index;
-    p.timestamp_s = trajectory[i].timestamp_s;
-    p.world_from_cam = trajectory[i].world_from_cam;
-    out.new_points.push_back(p);
-  }
+  const std::vector<TimedPose>& trajectory = pipeline.trajectory();
+  out.new_points.assign(trajectory.begin() + static_cast<std::ptrdiff_t>(points_sent_),
+                        trajectory.end());
   points_sent_ = trajectory.size();
 
   std::set<int> now;
