@@ -7,6 +7,7 @@
 #include <cstdlib>
 
 #include "api/convert.h"
+#include "core/common/angles.h"
 #include "core/common/camera.h"
 
 namespace slapse::api {
@@ -31,8 +32,26 @@ std::string Num(double v) {
   return buf;
 }
 
-double FovDeg(int size_px, double f_px) {
-  return 2.0 * std::atan(size_px / (2.0 * f_px)) * 180.0 / M_PI;
+// Field of view across `size_px` pixels at focal length `f_px`: 2 atan(size / 2f).
+double FovDeg(int size_px, double f_px) { return RadToDeg(2.0 * std::atan(size_px / (2.0 * f_px))); }
+
+// The focal length that gives `fov_deg` across `size_px` pixels (FovDeg's inverse).
+double FocalForFovPx(int size_px, double fov_deg) {
+  return size_px / (2.0 * std::tan(DegToRad(0.5 * fov_deg)));
+}
+
+// OK when the field of view `axis` ("horizontal" / "vertical") that focal
+// length `focal_name` = f_px gives across size_px pixels is in [min_deg, max_deg].
+Status CheckFov(const std::string& what, const std::string& focal_name, double f_px,
+                const std::string& axis, int size_px, double min_deg, double max_deg,
+                const std::string& image) {
+  const double fov_deg = FovDeg(size_px, f_px);
+  if (fov_deg >= min_deg && fov_deg <= max_deg) return Status::Ok();
+  return InvalidArgumentError(what + ": " + focal_name + " " + Num(f_px) + " gives a " + axis +
+                              " field of view of " + Num(fov_deg) + " deg on the " + image +
+                              " image; want " + Num(min_deg) + " to " + Num(max_deg) + " deg (" +
+                              focal_name + " about " + Num(FocalForFovPx(size_px, max_deg)) +
+                              " to " + Num(FocalForFovPx(size_px, min_deg)) + ")");
 }
 
 }  // namespace
@@ -271,26 +290,9 @@ Status ValidateIntrinsicsForImage(const v1::Intrinsics& k, int w, int h, const s
                                 " image; want 0 <= cx_px <= " + std::to_string(w) +
                                 " and 0 <= cy_px <= " + std::to_string(h));
   }
-  const double hfov = FovDeg(w, k.fx_px()), vfov = FovDeg(h, k.fy_px());
-  if (!(hfov >= kMinHorizontalFovDeg && hfov <= kMaxFovDeg)) {
-    return InvalidArgumentError(what + ": fx_px " + Num(k.fx_px()) +
-                                " gives a horizontal field "
-                                "of view of " +
-                                Num(hfov) + " deg on the " + size +
-                                " image; want 10 to 170 deg (fx_px about " +
-                                Num(w / (2 * std::tan(85 * M_PI / 180))) + " to " +
-                                Num(w / (2 * std::tan(5 * M_PI / 180))) + ")");
-  }
-  if (!(vfov >= kMinVerticalFovDeg && vfov <= kMaxFovDeg)) {
-    return InvalidArgumentError(what + ": fy_px " + Num(k.fy_px()) +
-                                " gives a vertical field "
-                                "of view of " +
-                                Num(vfov) + " deg on the " + size +
-                                " image; want 5 to 170 deg (fy_px about " +
-                                Num(h / (2 * std::tan(85 * M_PI / 180))) + " to " +
-                                Num(h / (2 * std::tan(2.5 * M_PI / 180))) + ")");
-  }
-  return Status::Ok();
+  SLAPSE_RETURN_IF_ERROR(CheckFov(what, "fx_px", k.fx_px(), "horizontal", w, kMinHorizontalFovDeg,
+                                  kMaxFovDeg, size));
+  return CheckFov(what, "fy_px", k.fy_px(), "vertical", h, kMinVerticalFovDeg, kMaxFovDeg, size);
 }
 
 }  // namespace slapse::api
