@@ -33,7 +33,9 @@ std::string Num(double v) {
 }
 
 // Field of view across `size_px` pixels at focal length `f_px`: 2 atan(size / 2f).
-double FovDeg(int size_px, double f_px) { return RadToDeg(2.0 * std::atan(size_px / (2.0 * f_px))); }
+double FovDeg(int size_px, double f_px) {
+  return RadToDeg(2.0 * std::atan(size_px / (2.0 * f_px)));
+}
 
 // The focal length that gives `fov_deg` across `size_px` pixels (FovDeg's inverse).
 double FocalForFovPx(int size_px, double fov_deg) {
@@ -290,8 +292,8 @@ Status ValidateIntrinsicsForImage(const v1::Intrinsics& k, int w, int h, const s
                                 " image; want 0 <= cx_px <= " + std::to_string(w) +
                                 " and 0 <= cy_px <= " + std::to_string(h));
   }
-  SLAPSE_RETURN_IF_ERROR(CheckFov(what, "fx_px", k.fx_px(), "horizontal", w, kMinHorizontalFovDeg,
-                                  kMaxFovDeg, size));
+  SLAPSE_RETURN_IF_ERROR(
+      CheckFov(what, "fx_px", k.fx_px(), "horizontal", w, kMinHorizontalFovDeg, kMaxFovDeg, size));
   return CheckFov(what, "fy_px", k.fy_px(), "vertical", h, kMinVerticalFovDeg, kMaxFovDeg, size);
 }
 

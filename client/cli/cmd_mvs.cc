@@ -97,9 +97,8 @@ struct MvCounts {
 
 void PrintSummary(const std::string& input, const StreamInfo& info, const ReadStats& stats,
                   MvCounts& c, double seconds) {
-  std::printf("input      %s (%s, %s, %dx%d @ %.2f fps)\n", input.c_str(),
-              info.format_name.c_str(), info.codec_name.c_str(), info.width_px, info.height_px,
-              info.fps);
+  std::printf("input      %s (%s, %s, %dx%d @ %.2f fps)\n", input.c_str(), info.format_name.c_str(),
+              info.codec_name.c_str(), info.width_px, info.height_px, info.fps);
   std::printf(
       "frames     %lld (I %lld, P %lld, B %lld), n_B = %d, MV precision 1/%d px "
       "(sigma %.3f px)%s\n",
@@ -119,8 +118,9 @@ void PrintSummary(const std::string& input, const StreamInfo& info, const ReadSt
             : "",
         info.b_pyramid ? "direct vectors only" : "vectors as if they used the nearest anchor");
   }
-  std::printf("vectors    %lld (past %lld, future %lld)\n", static_cast<long long>(c.past + c.future),
-              static_cast<long long>(c.past), static_cast<long long>(c.future));
+  std::printf("vectors    %lld (past %lld, future %lld)\n",
+              static_cast<long long>(c.past + c.future), static_cast<long long>(c.past),
+              static_cast<long long>(c.future));
   std::printf("|motion|   median %.2f px in P frames, %.2f px in B frames\n", Median(c.p_motion),
               Median(c.b_motion));
   std::printf("speed      %.3f s, %.0f frames/s (open + demux + decode + MV export)\n", seconds,
@@ -203,8 +203,7 @@ int RunMvs(int argc, char** argv) {
   if (!quiet) {
     PrintSummary(input, info, stats, counts, seconds);
     if (drawn)
-      std::printf("picture    %s (frame %lld)\n", png.c_str(),
-                  static_cast<long long>(draw_frame));
+      std::printf("picture    %s (frame %lld)\n", png.c_str(), static_cast<long long>(draw_frame));
   }
   if (draw_frame >= 0 && !drawn) {
     return Fail("mvs", "--draw " + std::to_string(draw_frame) + ": the stream has only " +

@@ -11,12 +11,12 @@
 #include "client/cli/commands.h"
 #include "client/cli/flags.h"
 #include "core/common/intrinsics_io.h"
-#include "lab/eval/extraction_eval.h"
 #include "core/merge/mv_merge.h"
 #include "core/mv/mv_reader.h"
 #include "core/pipeline/front_end.h"
 #include "core/planes/infinity.h"
 #include "core/planes/plane_extraction.h"
+#include "lab/eval/extraction_eval.h"
 #include "lab/sim/simulate.h"
 #include "lab/viz/plane_overlay.h"
 
@@ -134,12 +134,11 @@ int RunPlanes(int argc, char** argv) {
     if (!cv::imwrite(png, picture)) {
       return Fail("planes", "cannot write " + png);
     }
-    std::printf("anchors %lld -> %lld (%s): %zu correspondences, %zu with parallax, %zu planes\n",
-                static_cast<long long>(pair.earlier_index),
-                static_cast<long long>(pair.later_index), SegmentTypeName(pair.type),
-                pair.correspondences.size(),
-                step->infinity.ok() ? step->infinity->kept_indices.size() : size_t{0},
-                planes.size());
+    std::printf(
+        "anchors %lld -> %lld (%s): %zu correspondences, %zu with parallax, %zu planes\n",
+        static_cast<long long>(pair.earlier_index), static_cast<long long>(pair.later_index),
+        SegmentTypeName(pair.type), pair.correspondences.size(),
+        step->infinity.ok() ? step->infinity->kept_indices.size() : size_t{0}, planes.size());
     for (const Status* s : {&step->infinity.status(), &step->extraction.status()}) {
       if (!s->ok()) std::printf("  no planes: %s\n", s->ToString().c_str());
     }

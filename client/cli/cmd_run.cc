@@ -12,11 +12,11 @@
 #include "client/cli/commands.h"
 #include "client/cli/flags.h"
 #include "core/common/intrinsics_io.h"
-#include "lab/eval/plane_map_eval.h"
-#include "lab/eval/trajectory_eval.h"
 #include "core/mv/mv_reader.h"
 #include "core/pipeline/pipeline.h"
 #include "core/pipeline/result_io.h"
+#include "lab/eval/plane_map_eval.h"
+#include "lab/eval/trajectory_eval.h"
 #include "lab/gt/ground_truth.h"
 #include "lab/viz/plane_overlay.h"
 #include "lab/viz/top_down_plot.h"
@@ -50,8 +50,7 @@ CsvFile OpenStepsCsv(const std::string& path) {
 }
 
 // One --steps-csv row for an anchor pair.
-void WriteStepRow(std::FILE* csv, const PipelineStep& s,
-                  const std::vector<TimedPose>& traj) {
+void WriteStepRow(std::FILE* csv, const PipelineStep& s, const std::vector<TimedPose>& traj) {
   // extracted: track_id:MBs:t(racked)/n(ew):track_change, space separated.
   std::string extracted;
   for (const ExtractedPlane& ex : s.extracted) {

@@ -130,8 +130,8 @@ int RunSimulate(int argc, char** argv) {
   SimulateReport report;
   if (Status s = SimulateDrive(opt, &report); !s.ok()) return Fail("simulate", s.ToString());
   std::printf("video      %s (%s, %s, %d frames, %dx%d @ %.0f fps)\n", report.video_path.c_str(),
-              VideoCodecName(opt.encoder.codec), gop.c_str(), report.frames,
-              opt.width_px, opt.height_px, opt.fps);
+              VideoCodecName(opt.encoder.codec), gop.c_str(), report.frames, opt.width_px,
+              opt.height_px, opt.fps);
   std::printf("drive      %.1f m, %d planes in the scene, seed %llu\n", report.distance_m,
               report.num_planes, static_cast<unsigned long long>(opt.seed));
   std::printf("time       render %.2f s (%.1f ms/frame), encode %.2f s (%.1f ms/frame)\n",

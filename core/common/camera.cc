@@ -25,8 +25,7 @@ Status ValidateIntrinsics(const Intrinsics& k, const std::string& what) {
     return InvalidArgumentError(what + ": cx_px and cy_px must be finite");
   }
   if (k.width_px < 0 || k.height_px < 0) {
-    return InvalidArgumentError(what +
-                                ": width_px and height_px must be >= 0 (0 = the stream's)");
+    return InvalidArgumentError(what + ": width_px and height_px must be >= 0 (0 = the stream's)");
   }
   return Status::Ok();
 }

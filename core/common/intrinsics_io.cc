@@ -22,8 +22,8 @@ StatusOr<Intrinsics> IntrinsicsFromJson(const Json& doc, const std::string& wher
     }
   }
   // Optional: the size the intrinsics are for (0 = any stream).
-  for (const auto& [key, value] : {std::pair<const char*, int*>{"width_px", &k.width_px},
-                                   {"height_px", &k.height_px}}) {
+  for (const auto& [key, value] :
+       {std::pair<const char*, int*>{"width_px", &k.width_px}, {"height_px", &k.height_px}}) {
     if (!doc.contains(key)) continue;
     if (Status s = GetInt(doc, key, where, value); !s.ok()) {
       return InvalidArgumentError(s.message());
@@ -36,7 +36,8 @@ StatusOr<Intrinsics> IntrinsicsFromJson(const Json& doc, const std::string& wher
 }  // namespace
 
 StatusOr<Intrinsics> ReadIntrinsicsJson(const std::string& path) {
-  if (!std::filesystem::exists(path)) return NotFoundError("cannot read intrinsics file '" + path + "'");
+  if (!std::filesystem::exists(path))
+    return NotFoundError("cannot read intrinsics file '" + path + "'");
   auto doc = ReadJsonFile(path);
   if (!doc.ok()) return InvalidArgumentError("intrinsics file: " + doc.status().message());
   return IntrinsicsFromJson(*doc, "intrinsics file '" + path + "'");

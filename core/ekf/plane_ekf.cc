@@ -453,8 +453,7 @@ void PlaneEkf::ReidentifyRoad(Association* a, UpdateReport* rep) {
 // and P9 the prior covariance of (theta, t, pi), the innovation covariance is
 //   S = J P9 J^T + (s^2 + extra_sigma_px^2) I,
 // and the MB's squared Mahalanobis innovation r^T S^-1 r (r = z - h(x)).
-std::optional<double> PlaneEkf::MedianInnovation(size_t index,
-                                                 const PlaneObservation& obs) const {
+std::optional<double> PlaneEkf::MedianInnovation(size_t index, const PlaneObservation& obs) const {
   const double extra2 = options_.extra_sigma_px * options_.extra_sigma_px;
   const int o = PlaneOffset(index);
   Eigen::Matrix<double, 9, 9> P9;
@@ -466,8 +465,8 @@ std::optional<double> PlaneEkf::MedianInnovation(size_t index,
   for (size_t j = 0; j < obs.x_later_px.size(); ++j) {
     Eigen::Vector2d z;
     Eigen::Matrix<double, 2, 3> d_theta, d_t, d_pi;
-    if (!ObservePoint(K_, K_inv_, R_, t_, planes_[index].pi, obs.x_later_px[j], &z, &d_theta,
-                      &d_t, &d_pi)) {
+    if (!ObservePoint(K_, K_inv_, R_, t_, planes_[index].pi, obs.x_later_px[j], &z, &d_theta, &d_t,
+                      &d_pi)) {
       chi2.push_back(1e9);
       continue;
     }
@@ -572,8 +571,8 @@ void PlaneEkf::AccumulateMeasurements(const std::vector<TrackedObservation>& tra
 // Gauss-Newton step solves
 //   (P-^-1 + sum_j H_j^T H_j / s_j^2) delta = sum_j H_j^T r_j / s_j^2 - P-^-1 e,
 // e = x - x-, and retracts x <- x (+) delta; P+ = (P-^-1 + sum H^T H / s^2)^-1.
-Status PlaneEkf::IteratedUpdate(const std::vector<TrackedObservation>& tracked,
-                                UpdateReport* rep, std::vector<Eigen::Vector3d>* pi0_out) {
+Status PlaneEkf::IteratedUpdate(const std::vector<TrackedObservation>& tracked, UpdateReport* rep,
+                                std::vector<Eigen::Vector3d>* pi0_out) {
   const int n = static_cast<int>(P_.rows());
   Eigen::MatrixXd P_inv;
   if (!InverseSpd(P_, &P_inv)) {
@@ -648,8 +647,8 @@ void PlaneEkf::PinScale(const std::vector<TrackedObservation>& tracked,
   // every established plane.
   std::set<size_t> pins;
   for (const auto& [index, obs] : tracked) {
-    if (planes_[index].observations >= options_.pin_scale_min_observations &&
-        planes_[index].road && options_.road_pins_scale) {
+    if (planes_[index].observations >= options_.pin_scale_min_observations && planes_[index].road &&
+        options_.road_pins_scale) {
       pins.insert(index);
     }
   }

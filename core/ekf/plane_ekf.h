@@ -228,8 +228,8 @@ class PlaneEkf {
   // plane in planes_ and the observation.
   using TrackedObservation = std::pair<size_t, const PlaneObservation*>;
   struct Association {
-    std::vector<TrackedObservation> tracked;   // of planes in the state
-    std::vector<const PlaneObservation*> fresh;  // to be added as new planes
+    std::vector<TrackedObservation> tracked;         // of planes in the state
+    std::vector<const PlaneObservation*> fresh;      // to be added as new planes
     std::set<const PlaneObservation*> reidentified;  // new ids taken as the road
   };
   // Maps observation ids through the road aliases, deletes (or coasts) the
@@ -246,9 +246,8 @@ class PlaneEkf {
                         std::vector<Eigen::Vector3d>* pi0);
   // Adds the MB measurements (and the road-height pseudo-measurement) at the
   // current estimate to the information matrix and right-hand side.
-  void AccumulateMeasurements(const std::vector<TrackedObservation>& tracked,
-                              Eigen::MatrixXd* info, Eigen::VectorXd* rhs, double* sq_sum,
-                              int* count) const;
+  void AccumulateMeasurements(const std::vector<TrackedObservation>& tracked, Eigen::MatrixXd* info,
+                              Eigen::VectorXd* rhs, double* sq_sum, int* count) const;
   void PinScale(const std::vector<TrackedObservation>& tracked,
                 const std::vector<Eigen::Vector3d>& pi0, UpdateReport* rep);
 
