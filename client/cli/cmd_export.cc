@@ -5,12 +5,11 @@
 #include <filesystem>
 #include <iostream>
 
+#include "api/convert.h"
 #include "client/cli/commands.h"
 #include "client/cli/flags.h"
 #include "client/lib/client.h"
-#include "api/convert.h"
 #include "core/pipeline/result_io.h"
-#include "server/server.h"
 
 namespace slapse::cli {
 namespace {
@@ -30,11 +29,8 @@ int RunExport(int argc, char** argv) {
                  "writes them)",
                  "SESSION");
   CLI::App& app = cl.app();
-  std::string server = "localhost:" + std::to_string(server::ServerOptions{}.port);
-  std::string format = "json", out = "-";
-  app.add_option("--server", server, "the slapse server")
-      ->type_name("HOST:PORT")
-      ->capture_default_str();
+  std::string server, format = "json", out = "-";
+  AddServerFlag(&cl, &server);
   app.add_option("--format", format,
                  "tum or kitti (trajectory, as run's trajectory_*.txt), json (trajectory + planes, "
                  "run's planes.json schema)")

@@ -20,14 +20,6 @@
 namespace slapse::cli {
 namespace {
 
-// --server HOST:PORT, default: this machine on the server's default port.
-void AddServerFlag(CommandLine* cl, std::string* server) {
-  *server = "localhost:" + std::to_string(server::ServerOptions{}.port);
-  cl->app().add_option("--server", *server, "the slapse server")
-      ->type_name("HOST:PORT")
-      ->capture_default_str();
-}
-
 // Parses; returns -1 to go on, else the exit code (help printed or usage error).
 int ParseOrExit(CommandLine& cl, int argc, char** argv, size_t positional) {
   if (int rc = cl.Parse(argc, argv); rc >= 0) return rc;
@@ -182,7 +174,8 @@ void AddSourceFlags(CLI::App& app, SourceFlags* f) {
   app.add_option("--rtsp-push", f->rtsp_push,
                  "a camera publishes (RTSP ANNOUNCE/RECORD) to the printed URL")
       ->type_name("PATH");
-  app.add_option("--rtp-sdp", f->rtp_sdp, "the server receives the RTP that this SDP file describes")
+  app.add_option("--rtp-sdp", f->rtp_sdp,
+                 "the server receives the RTP that this SDP file describes")
       ->type_name("FILE");
   // 0 = the server's default (the request's proto fields say so).
   app.add_option("--start-timeout-ms", f->start_timeout_ms,
@@ -228,8 +221,8 @@ Status SetSource(const CommandLine& cl, const SourceFlags& f, v1::Session* reque
     // Ranges are the server's (it answers INVALID_ARGUMENT with the reason).
     SLAPSE_RETURN_IF_ERROR(
         CheckRange("reconnect-attempts", f.reconnect_attempts, int64_t{0}, int64_t{INT32_MAX}));
-    SLAPSE_RETURN_IF_ERROR(CheckRange("reconnect-interval-ms", f.reconnect_interval_ms,
-                                      int64_t{0}, int64_t{INT32_MAX}));
+    SLAPSE_RETURN_IF_ERROR(CheckRange("reconnect-interval-ms", f.reconnect_interval_ms, int64_t{0},
+                                      int64_t{INT32_MAX}));
     SLAPSE_RETURN_IF_ERROR(CheckRange("reconnect-backoff", f.reconnect_backoff, 0, 1e9));
     SLAPSE_RETURN_IF_ERROR(CheckRange("reconnect-max-interval-ms", f.reconnect_max_interval_ms,
                                       int64_t{0}, int64_t{INT32_MAX}));
@@ -273,9 +266,10 @@ StatusOr<Intrinsics> SessionIntrinsics(const std::string& spec) {
 }  // namespace
 
 int RunCreate(int argc, char** argv) {
-  CommandLine cl("create",
-                 "--upload|--rtsp-pull URL|--rtsp-push PATH|--rtp-sdp FILE --intrinsics SPEC "
-                 "[options]\n  (prints the session name; for --rtsp-push also the URL to publish to)");
+  CommandLine cl(
+      "create",
+      "--upload|--rtsp-pull URL|--rtsp-push PATH|--rtp-sdp FILE --intrinsics SPEC "
+      "[options]\n  (prints the session name; for --rtsp-push also the URL to publish to)");
   CLI::App& app = cl.app();
   std::string server, intrinsics_spec;
   AddServerFlag(&cl, &server);
@@ -349,7 +343,8 @@ int RunWatch(int argc, char** argv) {
   AddServerFlag(&cl, &server);
   int64_t after = 0;
   bool json = false;
-  cl.app().add_option("--after", after, "only events after sequence N")
+  cl.app()
+      .add_option("--after", after, "only events after sequence N")
       ->type_name("N")
       ->capture_default_str();
   cl.app().add_flag("--json", json, "one JSON object per line");

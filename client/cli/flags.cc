@@ -7,6 +7,7 @@
 
 #include "client/cli/commands.h"
 #include "core/common/intrinsics_io.h"
+#include "server/server.h"
 
 namespace slapse::cli {
 
@@ -74,8 +75,7 @@ Status CheckRange(const std::string& name, int64_t v, int64_t min, int64_t max) 
 void ScaleFlags::AddTo(CommandLine* command_line) {
   command_line_ = command_line;
   CLI::App& app = command_line->app();
-  app.add_option("--first-step-m", first_step_m_,
-                 "metric scale: length of the first tracked step")
+  app.add_option("--first-step-m", first_step_m_, "metric scale: length of the first tracked step")
       ->type_name("M");
   app.add_option("--speed-kmh", speed_kmh_, "metric scale: speed at the start")->type_name("V");
   app.add_option("--camera-height-m", camera_height_m_,
@@ -119,6 +119,14 @@ StatusOr<Intrinsics> IntrinsicsFor(const std::string& spec, const std::string& i
         input);
   }
   return ParseIntrinsicsSpec(beside.string(), width_px, height_px);
+}
+
+void AddServerFlag(CommandLine* command_line, std::string* server) {
+  *server = "localhost:" + std::to_string(server::ServerOptions{}.port);
+  command_line->app()
+      .add_option("--server", *server, "the slapse server")
+      ->type_name("HOST:PORT")
+      ->capture_default_str();
 }
 
 }  // namespace slapse::cli

@@ -46,6 +46,10 @@ class CommandLine {
 Status CheckRange(const std::string& name, double v, double min, double max);
 Status CheckRange(const std::string& name, int64_t v, int64_t min, int64_t max);
 
+// --server HOST:PORT (the client commands), default: this machine on the
+// server's default port (ServerOptions).
+void AddServerFlag(CommandLine* command_line, std::string* server);
+
 // The metric-scale flags shared by `run` and `create`: --first-step-m,
 // --speed-kmh, --camera-height-m (at most one).
 class ScaleFlags {
