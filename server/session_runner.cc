@@ -205,7 +205,9 @@ void SessionRunner::Publish(const FrameRecord& frame, const PipelineStep* step) 
     st->set_fps(wall_s > 0 && (frames_ >= 10 || wall_s >= 0.25) ? frames_ / wall_s : 0.0);
     st->set_lag_ms(std::max(0.0, wall_s - frame.timestamp_s) * 1e3);
     st->set_stream_time_s(frame.timestamp_s);
-    session_->no_pose_reason = NoPoseReason(step);
+    // Read only by a FINISHED ending without poses: not kept once there are poses
+    // (the trajectory snapshot never empties again, a rescale refills it at once).
+    if (session_->trajectory.empty()) session_->no_pose_reason = NoPoseReason(step);
     if (step != nullptr) {
       ++pairs_;
       tracked_ += step->tracking;
