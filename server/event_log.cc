@@ -59,6 +59,7 @@ Status EventLog::Read(uint64_t after_sequence, size_t max_events,
                       std::vector<v1::SessionEvent>* out, bool* ended) {
   std::unique_lock<std::mutex> lock(mu_);
   *ended = false;
+  const size_t before = out->size();  // `out` may hold events already
   changed_.wait_until(lock, deadline, [&] { return closed_ || last_sequence_ > after_sequence; });
   const uint64_t first = ring_.empty() ? last_sequence_ + 1 : ring_.front().sequence();
   if (after_sequence + 1 < first && after_sequence < last_sequence_) {
@@ -70,7 +71,7 @@ Status EventLog::Read(uint64_t after_sequence, size_t max_events,
       Backfill backfill = backfill_;
       lock.unlock();
       SLAPSE_RETURN_IF_ERROR(backfill(after_sequence, max_events, out));
-      if (!out->empty()) {
+      if (out->size() > before) {
         if (closed && out->back().sequence() >= last) *ended = true;
         return Status::Ok();
       }
@@ -80,11 +81,11 @@ Status EventLog::Read(uint64_t after_sequence, size_t max_events,
                            "); fetch a snapshot (GetTrajectory, GetPlaneMap) and "
                            "watch after its last_sequence");
   }
-  for (uint64_t seq = after_sequence + 1; seq <= last_sequence_ && out->size() < max_events;
-       ++seq) {
+  for (uint64_t seq = after_sequence + 1;
+       seq <= last_sequence_ && out->size() - before < max_events; ++seq) {
     out->push_back(ring_[seq - first]);
   }
-  if (closed_ && after_sequence + out->size() >= last_sequence_) *ended = true;
+  if (closed_ && after_sequence + (out->size() - before) >= last_sequence_) *ended = true;
   return Status::Ok();
 }
 

@@ -44,7 +44,7 @@ v1::Session NewRow(const std::string& name) {
   s.set_name(name);
   s.set_state(v1::Session::RUNNING);
   s.mutable_upload();
-  s.mutable_intrinsics()->set_fx(500);
+  s.mutable_intrinsics()->set_fx_px(500);
   return s;
 }
 
@@ -88,7 +88,7 @@ TEST_F(StoreTest, ACommittedStepIsThereAfterReopening) {
   EXPECT_EQ(s.ordinal, ordinal);
   EXPECT_EQ(s.proto.name(), "sessions/abc");
   EXPECT_EQ(s.proto.stats().frames(), 42);
-  EXPECT_EQ(s.proto.intrinsics().fx(), 500);  // the whole proto persists
+  EXPECT_EQ(s.proto.intrinsics().fx_px(), 500);  // the whole proto persists
   EXPECT_TRUE(s.metric);
   EXPECT_EQ(s.last_sequence, 2u);
   EXPECT_EQ(s.points, 3);
