@@ -106,7 +106,10 @@ bool SessionRunner::RunConnection(MvReader* reader, ConnectionEnd* end) {
     end->status = reader->Next(&frame);
     if (!end->status.ok()) return true;
     ++end->frames;
-    if (++frames_ == 1 && source_->network()) {
+    ++frames_;
+    // A connection's first frame: RUNNING (again, after a restart's CREATED;
+    // a no-op while already RUNNING).
+    if (end->frames == 1 && source_->network()) {
       session_->Transition(v1::Session::RUNNING, Status::Ok(), "receiving the stream");
     }
     if (!Feed(frame)) return false;
