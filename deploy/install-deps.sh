@@ -20,6 +20,8 @@ PACKAGES=(
   libcli11-dev nlohmann-json3-dev
   # service
   libgrpc++-dev libprotobuf-dev protobuf-compiler protobuf-compiler-grpc
+  # service persistence: sessions, events, trajectories, plane maps (server/store.cc)
+  libsqlite3-dev
   # tests
   libgtest-dev libgmock-dev
   # tests: the real RTSP server the RTSP pull tests pull from (tests/rtsp_server.py):

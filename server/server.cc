@@ -17,9 +17,14 @@ StatusOr<std::unique_ptr<SlapseServer>> SlapseServer::Start(const ServerOptions&
   if (options.sessions.max_sessions < 1) {
     return InvalidArgumentError("max_sessions must be >= 1");
   }
+  if (options.sessions.retention_ttl_s < 0) {
+    return InvalidArgumentError("retention_ttl_s must be >= 0 (0: keep results)");
+  }
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   std::unique_ptr<SlapseServer> server(new SlapseServer(options));
+  // Restores the stored sessions before anyone can call.
+  SLAPSE_RETURN_IF_ERROR(server->manager_.Open());
   grpc::ServerBuilder builder;
   const std::string address = options.address + ":" + std::to_string(options.port);
   builder.AddListeningPort(address, grpc::InsecureServerCredentials(), &server->port_);

@@ -94,20 +94,31 @@ grpc::Status SlapseServiceImpl::WatchSession(grpc::ServerContext* context,
       if (!writer->Write(e)) return grpc::Status(grpc::StatusCode::CANCELLED, "client went away");
       cursor = e.sequence();
     }
-    if (ended) return grpc::Status::OK;
+    if (ended) {
+      // Suspended at shutdown (persistent store): the session goes on after
+      // the restart.
+      auto now = manager_->Get(request->name());
+      if (shutting_down_ && now.ok() && !IsTerminal(now->state())) {
+        return grpc::Status(grpc::StatusCode::UNAVAILABLE,
+                            "the server is shutting down; the session resumes when it restarts: "
+                            "watch again after sequence " +
+                                std::to_string(cursor));
+      }
+      return grpc::Status::OK;
+    }
   }
 }
 
 grpc::Status SlapseServiceImpl::GetTrajectory(grpc::ServerContext*,
                                               const v1::GetTrajectoryRequest* request,
                                               v1::Trajectory* response) {
-  return Reply(manager_->GetTrajectory(request->name()), response);
+  return Reply(manager_->GetTrajectory(*request), response);
 }
 
 grpc::Status SlapseServiceImpl::GetPlaneMap(grpc::ServerContext*,
                                             const v1::GetPlaneMapRequest* request,
                                             v1::PlaneMap* response) {
-  return Reply(manager_->GetPlaneMap(request->name()), response);
+  return Reply(manager_->GetPlaneMap(*request), response);
 }
 
 }  // namespace slapse::server

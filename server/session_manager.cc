@@ -7,7 +7,10 @@
 #include <google/protobuf/util/time_util.h>
 
 #include <algorithm>
+#include <array>
+#include <cmath>
 #include <cstdlib>
+#include <random>
 
 #include "api/validate.h"
 #include "server/ingest_source.h"
@@ -21,6 +24,118 @@ SessionManager::SessionManager(SessionManagerOptions options)
     : options_(options), pool_(options_.max_sessions) {}
 
 SessionManager::~SessionManager() { Shutdown(); }
+
+namespace {
+
+// 128 random bits as 26 base32 characters (RFC 4648 alphabet, lower case).
+std::string RandomSessionId() {
+  static constexpr char kAlphabet[] = "abcdefghijklmnopqrstuvwxyz234567";
+  std::random_device rd;  // /dev/urandom
+  std::array<uint32_t, 4> words{rd(), rd(), rd(), rd()};
+  std::string id;
+  int bits = 0;
+  uint64_t acc = 0;
+  for (uint32_t w : words) {
+    acc = (acc << 32) | w;
+    bits += 32;
+    while (bits >= 5) {
+      id += kAlphabet[(acc >> (bits - 5)) & 31];
+      bits -= 5;
+    }
+  }
+  id += kAlphabet[(acc << (5 - bits)) & 31];  // the last 3 bits
+  return id;
+}
+
+constexpr const char* kSessionPrefix = "sessions/";
+
+}  // namespace
+
+UploadQueueOptions SessionManager::QueueOptions() const {
+  UploadQueueOptions q;
+  q.capacity_bytes = options_.upload_buffer_bytes;
+  q.max_total_bytes = options_.max_upload_bytes;
+  q.start_idle_timeout_ms = options_.create_idle_timeout_ms;
+  q.stall_timeout_ms = options_.upload_stall_timeout_ms;
+  return q;
+}
+
+Status SessionManager::Open() {
+  auto store = Store::Open(options_.data_dir);
+  if (!store.ok()) return store.status();
+  store_ = std::move(*store);
+  auto stored = store_->LoadSessions();
+  if (!stored.ok()) return stored.status();
+  for (StoredSession& s : *stored) Restore(std::move(s));
+  if (options_.retention_ttl_s > 0) retention_ = std::thread([this] { RetentionLoop(); });
+  return Status::Ok();
+}
+
+void SessionManager::Restore(StoredSession stored) {
+  const v1::Session::State state = stored.proto.state();
+  auto s =
+      std::make_shared<Session>(stored.proto.name(), options_.event_ring_capacity, QueueOptions(),
+                                store_, stored.ordinal, stored.last_sequence, IsTerminal(state));
+  s->proto = std::move(stored.proto);
+  s->points = stored.points;
+  s->metric = stored.metric;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    sessions_[stored.ordinal] = s;
+    ordinals_[s->name] = stored.ordinal;
+  }
+  if (IsTerminal(state)) return;
+  if (s->proto.has_upload() && state == v1::Session::RUNNING) {
+    s->Transition(v1::Session::FAILED,
+                  Status(StatusCode::kAborted,
+                         "the server restarted during the upload (after " +
+                             std::to_string(s->proto.stats().frames()) +
+                             " frames were processed; their results are kept); upload the "
+                             "stream again to a new session"));
+    return;
+  }
+  if (!s->proto.has_upload()) {
+    s->segment = stored.max_segment + 1;
+    s->resumed_down_s =
+        TimeUtil::DurationToNanoseconds(TimeUtil::GetCurrentTime() - s->proto.update_time()) * 1e-9;
+    if (s->proto.stats().frames() > 0) {
+      s->resumed_last_index =
+          std::max<int64_t>(stored.max_anchor_index, s->proto.stats().frames() - 1);
+    }
+    if (state == v1::Session::RUNNING) {
+      s->Transition(v1::Session::CREATED, Status::Ok(),
+                    std::string("the server restarted; ") +
+                        (s->proto.has_rtsp_pull() ? "reconnecting to the camera"
+                                                  : "waiting for the sender again") +
+                        " (poses from now on are segment " + std::to_string(s->segment) +
+                        ", in a new world frame)");
+    }
+  }
+  pool_.Submit([s] { SessionRunner(s).Run(); });
+}
+
+void SessionManager::RetentionLoop() {
+  const int64_t ttl_s = options_.retention_ttl_s;
+  const auto period = std::chrono::milliseconds(std::clamp<int64_t>(ttl_s * 250, 200, 60000));
+  std::unique_lock<std::mutex> lock(mu_);
+  while (!shutting_down_) {
+    retention_cv_.wait_for(lock, period, [this] { return shutting_down_; });
+    if (shutting_down_) break;
+    std::vector<std::shared_ptr<Session>> all;
+    for (const auto& [ordinal, s] : sessions_) all.push_back(s);
+    lock.unlock();
+    const auto now = TimeUtil::GetCurrentTime();
+    for (const auto& s : all) {
+      v1::Session snap = s->Snapshot();
+      if (!IsTerminal(snap.state()) || snap.state() == v1::Session::EXPIRED) continue;
+      if (TimeUtil::DurationToSeconds(now - snap.update_time()) < ttl_s) continue;
+      s->Expire("its results were deleted by the retention policy: it ended (" +
+                v1::Session::State_Name(snap.state()) + ") more than " + std::to_string(ttl_s) +
+                " s ago (serve --retention-ttl-s)");
+    }
+    lock.lock();
+  }
+}
 
 int SessionManager::ActiveCountLocked() const {
   int n = 0;
@@ -38,6 +153,7 @@ StatusOr<v1::Session> SessionManager::Create(const v1::Session& request) {
   {
     std::lock_guard<std::mutex> lock(mu_);
     if (shutting_down_) return UnavailableError("the server is shutting down");
+    if (store_ == nullptr) return UnavailableError("the session store is not open");
     const int active = ActiveCountLocked();
     if (active >= options_.max_sessions) {
       return ResourceExhaustedError(
@@ -45,28 +161,27 @@ StatusOr<v1::Session> SessionManager::Create(const v1::Session& request) {
           std::to_string(options_.max_sessions) +
           " sessions active; stop or delete one, or retry later (serve --max-sessions)");
     }
-    const uint64_t id = next_id_++;
-    UploadQueueOptions q;
-    q.capacity_bytes = options_.upload_buffer_bytes;
-    q.max_total_bytes = options_.max_upload_bytes;
-    q.start_idle_timeout_ms = options_.create_idle_timeout_ms;
-    q.stall_timeout_ms = options_.upload_stall_timeout_ms;
-    s = std::make_shared<Session>("sessions/" + std::to_string(id), options_.event_ring_capacity,
-                                  q);
-    s->proto = request;
-    s->proto.set_name(s->name);
-    s->proto.clear_stats();
-    s->proto.clear_error();
-    s->proto.clear_ingest_url();
+    v1::Session proto = request;
+    proto.set_name(kSessionPrefix + RandomSessionId());
+    proto.clear_stats();
+    proto.clear_error();
+    proto.clear_ingest_url();
     if (request.has_rtsp_push()) {
       auto url = RtspPushIngestUrl(options_.rtsp_push_host, request.rtsp_push().path());
       if (!url.ok()) return url.status();
-      s->proto.set_ingest_url(*url);
+      proto.set_ingest_url(*url);
     }
-    s->proto.set_state(v1::Session::STATE_UNSPECIFIED);
-    *s->proto.mutable_create_time() = TimeUtil::GetCurrentTime();
+    proto.set_state(v1::Session::STATE_UNSPECIFIED);
+    *proto.mutable_create_time() = TimeUtil::GetCurrentTime();
+    *proto.mutable_update_time() = proto.create_time();
+    auto ordinal = store_->AddSession(proto);
+    if (!ordinal.ok()) return ordinal.status();
+    s = std::make_shared<Session>(proto.name(), options_.event_ring_capacity, QueueOptions(),
+                                  store_, *ordinal);
+    s->proto = std::move(proto);
     s->Transition(v1::Session::CREATED, Status::Ok(), "created; waiting for the stream");
-    sessions_[id] = s;
+    sessions_[*ordinal] = s;
+    ordinals_[s->name] = *ordinal;
     // Queued under mu_, so a Shutdown after this still runs (and ends) it.
     pool_.Submit([s] { SessionRunner(s).Run(); });
   }
@@ -74,19 +189,17 @@ StatusOr<v1::Session> SessionManager::Create(const v1::Session& request) {
 }
 
 StatusOr<std::shared_ptr<Session>> SessionManager::Find(const std::string& name) const {
-  const std::string prefix = "sessions/";
-  uint64_t id = 0;
-  bool ok = name.size() > prefix.size() && name.compare(0, prefix.size(), prefix) == 0 &&
-            name.size() - prefix.size() <= 19;
+  const std::string prefix = kSessionPrefix;
+  bool ok = name.size() > prefix.size() && name.size() <= prefix.size() + 64 &&
+            name.compare(0, prefix.size(), prefix) == 0;
   for (size_t i = prefix.size(); ok && i < name.size(); ++i) {
-    ok = name[i] >= '0' && name[i] <= '9';
-    id = id * 10 + (name[i] - '0');
+    ok = (name[i] >= '0' && name[i] <= '9') || (name[i] >= 'a' && name[i] <= 'z');
   }
   if (!ok) return InvalidArgumentError("'" + name + "' is not a session name (sessions/{id})");
   std::lock_guard<std::mutex> lock(mu_);
-  auto it = sessions_.find(id);
-  if (it == sessions_.end()) return NotFoundError("no session '" + name + "' on this server");
-  return it->second;
+  auto it = ordinals_.find(name);
+  if (it == ordinals_.end()) return NotFoundError("no session '" + name + "' on this server");
+  return sessions_.at(it->second);
 }
 
 StatusOr<v1::Session> SessionManager::Get(const std::string& name) const {
@@ -100,10 +213,10 @@ StatusOr<v1::ListSessionsResponse> SessionManager::List(
   SLAPSE_RETURN_IF_ERROR(api::ValidateListRequest(request));
   const size_t page_size =
       request.page_size() == 0 ? 50 : std::min<size_t>(request.page_size(), 1000);
-  uint64_t after = 0;
+  int64_t after = 0;
   if (!request.page_token().empty()) {
     char* end = nullptr;
-    after = std::strtoull(request.page_token().c_str(), &end, 10);
+    after = std::strtoll(request.page_token().c_str(), &end, 10);
     if (end == nullptr || *end != '\0') return InvalidArgumentError("bad page_token");
   }
   std::vector<std::shared_ptr<Session>> candidates;
@@ -114,6 +227,7 @@ StatusOr<v1::ListSessionsResponse> SessionManager::List(
     }
   }
   v1::ListSessionsResponse out;
+  int64_t last_ordinal = 0;
   for (size_t i = 0; i < candidates.size(); ++i) {
     v1::Session snap = candidates[i]->Snapshot();
     if (request.state_filter() != v1::Session::STATE_UNSPECIFIED &&
@@ -121,12 +235,12 @@ StatusOr<v1::ListSessionsResponse> SessionManager::List(
       continue;
     }
     if (static_cast<size_t>(out.sessions_size()) == page_size) {
-      // More follow: the token is the id of the last session returned.
-      const std::string& last = out.sessions(out.sessions_size() - 1).name();
-      out.set_next_page_token(last.substr(std::string("sessions/").size()));
+      // More follow: the token is the ordinal of the last session returned.
+      out.set_next_page_token(std::to_string(last_ordinal));
       break;
     }
     *out.add_sessions() = std::move(snap);
+    last_ordinal = candidates[i]->ordinal;
   }
   return out;
 }
@@ -142,14 +256,12 @@ Status SessionManager::Delete(const std::string& name) {
   auto s = Find(name);
   if (!s.ok()) return s.status();
   (*s)->Stop("deleted");
-  std::lock_guard<std::mutex> lock(mu_);
-  for (auto it = sessions_.begin(); it != sessions_.end(); ++it) {
-    if (it->second == *s) {
-      sessions_.erase(it);
-      break;
-    }
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    sessions_.erase((*s)->ordinal);
+    ordinals_.erase((*s)->name);
   }
-  return Status::Ok();
+  return store_->DeleteSession((*s)->ordinal);
 }
 
 StatusOr<v1::Session> SessionManager::Upload(const std::string& name, std::string first_bytes,
@@ -209,29 +321,109 @@ StatusOr<std::shared_ptr<EventLog>> SessionManager::Events(const std::string& na
   return (*s)->events;
 }
 
-StatusOr<v1::Trajectory> SessionManager::GetTrajectory(const std::string& name) const {
-  auto found = Find(name);
+namespace {
+
+// Points in one unpaged GetTrajectory (below the 4 MiB message limit), and
+// the most one page may hold.
+constexpr size_t kMaxUnpagedPoints = 40000;
+constexpr size_t kMaxPageSize = 100000;
+
+// The page size asked for (0: everything up to `unpaged`, plus one to see
+// whether there is more) and the page token's number (-1: none).
+Status ParsePaging(int32_t page_size, const std::string& token, size_t unpaged, size_t* max,
+                   int64_t* after) {
+  if (page_size < 0) {
+    return InvalidArgumentError("page_size must be >= 0, got " + std::to_string(page_size));
+  }
+  *max = page_size == 0 ? unpaged : std::min<size_t>(page_size, kMaxPageSize);
+  if (token.empty()) return Status::Ok();
+  char* end = nullptr;
+  *after = std::strtoll(token.c_str(), &end, 10);
+  if (end == nullptr || *end != '\0' || *after < 0) {
+    return InvalidArgumentError("bad page_token '" + token +
+                                "': pass the next_page_token of the previous page");
+  }
+  return Status::Ok();
+}
+
+Status CheckNotExpired(const Session& s) {
+  if (s.proto.state() != v1::Session::EXPIRED) return Status::Ok();
+  return FailedPreconditionError(s.name + " is EXPIRED: " + s.proto.state_message());
+}
+
+}  // namespace
+
+StatusOr<v1::Trajectory> SessionManager::GetTrajectory(const v1::GetTrajectoryRequest& r) const {
+  size_t max = 0;
+  int64_t after = 0;
+  SLAPSE_RETURN_IF_ERROR(
+      ParsePaging(r.page_size(), r.page_token(), kMaxUnpagedPoints, &max, &after));
+  if (!std::isfinite(r.start_time_s()) || !std::isfinite(r.end_time_s()) ||
+      (r.end_time_s() > 0 && r.end_time_s() <= r.start_time_s())) {
+    return InvalidArgumentError(
+        "the time range [start_time_s, end_time_s) must be finite and "
+        "non-empty (end_time_s 0: no upper bound)");
+  }
+  auto found = Find(r.name());
   if (!found.ok()) return found.status();
   const Session& s = **found;
   v1::Trajectory out;
-  std::lock_guard<std::mutex> lock(s.mu);
-  out.set_name(s.name);
-  out.set_metric(s.metric);
-  for (const auto& p : s.trajectory) *out.add_points() = p;
+  {
+    std::lock_guard<std::mutex> lock(s.mu);
+    SLAPSE_RETURN_IF_ERROR(CheckNotExpired(s));
+    out.set_name(s.name);
+    out.set_metric(s.metric);
+  }
+  // The sequence first: the points read are at least as new as it says.
   out.set_last_sequence(s.events->last_sequence());
+  std::vector<v1::Trajectory::Point> points;
+  std::vector<int64_t> numbers;
+  const double start_s = r.start_time_s() > 0 ? r.start_time_s() : -1e300;
+  SLAPSE_RETURN_IF_ERROR(
+      store_->ReadPoints(s.ordinal, after, start_s, r.end_time_s(), max + 1, &points, &numbers));
+  if (points.size() > max) {
+    if (r.page_size() == 0) {
+      return ResourceExhaustedError(
+          s.name + " has more than " + std::to_string(kMaxUnpagedPoints) +
+          " trajectory points, more than one message holds: request pages (page_size, "
+          "page_token) or a time range; `slapse export` pages by itself");
+    }
+    points.pop_back();
+    out.set_next_page_token(std::to_string(numbers[max - 1]));
+  }
+  for (auto& p : points) *out.add_points() = std::move(p);
   return out;
 }
 
-StatusOr<v1::PlaneMap> SessionManager::GetPlaneMap(const std::string& name) const {
-  auto found = Find(name);
+StatusOr<v1::PlaneMap> SessionManager::GetPlaneMap(const v1::GetPlaneMapRequest& r) const {
+  size_t max = 0;
+  int64_t after = -1;
+  SLAPSE_RETURN_IF_ERROR(
+      ParsePaging(r.page_size(), r.page_token(), kMaxUnpagedPoints, &max, &after));
+  auto found = Find(r.name());
   if (!found.ok()) return found.status();
   const Session& s = **found;
   v1::PlaneMap out;
-  std::lock_guard<std::mutex> lock(s.mu);
-  out.set_name(s.name);
-  out.set_metric(s.metric);
-  for (const auto& [id, p] : s.planes) *out.add_planes() = p;
+  {
+    std::lock_guard<std::mutex> lock(s.mu);
+    SLAPSE_RETURN_IF_ERROR(CheckNotExpired(s));
+    out.set_name(s.name);
+    out.set_metric(s.metric);
+  }
   out.set_last_sequence(s.events->last_sequence());
+  std::vector<v1::PlaneMap::Plane> planes;
+  int64_t last_key = after;
+  SLAPSE_RETURN_IF_ERROR(store_->ReadPlanes(s.ordinal, after, max + 1, &planes, &last_key));
+  if (planes.size() > max) {
+    if (r.page_size() == 0) {
+      return ResourceExhaustedError(s.name + " has more than " + std::to_string(kMaxUnpagedPoints) +
+                                    " planes: request pages (page_size, page_token)");
+    }
+    planes.pop_back();
+    const v1::PlaneMap::Plane& last = planes.back();
+    out.set_next_page_token(std::to_string((int64_t{last.segment()} << 31) + last.track_id()));
+  }
+  for (auto& p : planes) *out.add_planes() = std::move(p);
   return out;
 }
 
@@ -242,7 +434,18 @@ void SessionManager::Shutdown() {
     shutting_down_ = true;
     for (const auto& [id, s] : sessions_) all.push_back(s);
   }
-  for (const auto& s : all) s->Stop("the server is shutting down");
+  retention_cv_.notify_all();
+  if (retention_.joinable()) retention_.join();
+  // A persistent store: the active sessions stay active in it and resume
+  // after the restart; in memory they end STOPPED.
+  const bool persistent = options_.data_dir != kInMemoryDataDir;
+  for (const auto& s : all) {
+    if (persistent) {
+      s->Suspend();
+    } else {
+      s->Stop("the server is shutting down");
+    }
+  }
   // The queued sessions run too: stopped, they end at once.
   pool_.Shutdown();
 }

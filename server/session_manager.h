@@ -3,22 +3,34 @@
 //
 // A session is active while CREATED or RUNNING; at most `max_sessions` are
 // active at once and each holds one worker thread for its whole life (stream
-// reads block), so the pool never oversubscribes. Finished sessions keep their
-// results until deleted.
+// reads block), so the pool never oversubscribes. Sessions and their results
+// persist in a Store (server/store.h) under `data_dir`; Open() restores them
+// after a restart. Finished sessions keep their results until deleted or,
+// with a retention TTL, until they expire (state EXPIRED).
+//
+// After a restart (clean or kill -9): finished sessions are as they were; an
+// upload that was running ends FAILED (ABORTED: upload again to a new
+// session), one not begun waits for its upload again; RTSP pull sessions
+// reconnect by themselves and RTSP push / RTP sessions wait for their sender
+// again (CREATED, then RUNNING), their poses in a new segment (a new
+// pipeline, so a new world frame: Trajectory.Point.segment).
 //
 // Thread-safety: every public method may be called from any thread.
 #pragma once
 
+#include <condition_variable>
 #include <cstdint>
 #include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
 #include <string>
+#include <thread>
 
 #include "core/common/status.h"
 #include "server/event_log.h"
 #include "server/session.h"
+#include "server/store.h"
 #include "server/worker_pool.h"
 #include "slapse/v1/slapse.pb.h"
 
@@ -42,6 +54,13 @@ struct SessionManagerOptions {
   // RTSP push: the address each session's RTSP listener binds (on a free
   // ephemeral port of its own) and that its ingest_url names.
   std::string rtsp_push_host = "127.0.0.1";
+  // Where sessions and results persist (server/store.h); kInMemoryDataDir
+  // keeps them in memory only (the library's default, for tests and
+  // embedding; `slapse serve` defaults to DefaultDataDir()).
+  std::string data_dir = kInMemoryDataDir;
+  // A finished session's results are deleted this long after it ended (it
+  // becomes EXPIRED, with a StateChange saying so); 0 = kept until deleted.
+  int64_t retention_ttl_s = 0;
 };
 
 class SessionManager {
@@ -51,6 +70,10 @@ class SessionManager {
   ~SessionManager();
   SessionManager(const SessionManager&) = delete;
   SessionManager& operator=(const SessionManager&) = delete;
+
+  // Opens the store and restores its sessions (above). Call once before
+  // serving; FAILED_PRECONDITION if the data directory is unusable.
+  Status Open();
 
   // Validates and starts a session from `request` (source, intrinsics,
   // pipeline options). INVALID_ARGUMENT (also a bad RTSP pull URL or
@@ -75,8 +98,10 @@ class SessionManager {
   // StateChange. NOT_FOUND if unknown.
   StatusOr<std::shared_ptr<EventLog>> Events(const std::string& name) const;
 
-  StatusOr<v1::Trajectory> GetTrajectory(const std::string& name) const;
-  StatusOr<v1::PlaneMap> GetPlaneMap(const std::string& name) const;
+  // Snapshots, a page at a time (see GetTrajectoryRequest). FAILED_PRECONDITION
+  // for an EXPIRED session.
+  StatusOr<v1::Trajectory> GetTrajectory(const v1::GetTrajectoryRequest& request) const;
+  StatusOr<v1::PlaneMap> GetPlaneMap(const v1::GetPlaneMapRequest& request) const;
 
   // Refuses new sessions, stops the active ones (they end STOPPED, their
   // watchers end) and joins the workers. Idempotent.
@@ -86,12 +111,21 @@ class SessionManager {
   // INVALID_ARGUMENT for a malformed name, NOT_FOUND for an unknown one.
   StatusOr<std::shared_ptr<Session>> Find(const std::string& name) const;
   int ActiveCountLocked() const;
+  UploadQueueOptions QueueOptions() const;
+  // Restores one stored session; resumes it if it was active.
+  void Restore(StoredSession stored);
+  // Retention: expires the finished sessions past retention_ttl_s, until
+  // Shutdown.
+  void RetentionLoop();
 
   const SessionManagerOptions options_;
+  std::shared_ptr<Store> store_;
   mutable std::mutex mu_;
-  std::map<uint64_t, std::shared_ptr<Session>> sessions_;  // by id = creation order
-  uint64_t next_id_ = 1;
+  std::map<int64_t, std::shared_ptr<Session>> sessions_;  // by ordinal = creation order
+  std::map<std::string, int64_t> ordinals_;               // name -> ordinal
   bool shutting_down_ = false;
+  std::condition_variable retention_cv_;  // with mu_: wakes the loop at Shutdown
+  std::thread retention_;
   WorkerPool pool_;  // one thread per active session; last, so it stops first
 };
 

@@ -45,6 +45,18 @@ v1::PlaneEvent::Kind KindToProto(PlaneChange::Kind kind) {
 
 SessionRunner::SessionRunner(std::shared_ptr<Session> session) : session_(std::move(session)) {
   source_ = IngestSource::Make(session_->Snapshot(), session_->upload);
+  std::lock_guard<std::mutex> lock(session_->mu);
+  if (session_->resumed_last_index < 0) return;
+  // Resumed after a restart: the counters go on, and the new pipeline's
+  // frames follow the old ones on the timeline, the outage's wall time later.
+  const v1::SessionStats& st = session_->proto.stats();
+  frames_ = st.frames();
+  pairs_ = st.anchor_pairs();
+  tracked_ = st.tracked_pairs();
+  last_index_ = session_->resumed_last_index;
+  last_timestamp_s_ = st.stream_time_s();
+  const auto down = std::chrono::duration<double>(std::max(0.0, session_->resumed_down_s));
+  last_frame_wall_ = Clock::now() - std::chrono::duration_cast<Clock::duration>(down);
 }
 
 bool SessionRunner::Interrupt() {
@@ -94,7 +106,10 @@ bool SessionRunner::RunConnection(MvReader* reader, ConnectionEnd* end) {
     end->status = reader->Next(&frame);
     if (!end->status.ok()) return true;
     ++end->frames;
-    if (++frames_ == 1 && source_->network()) {
+    ++frames_;
+    // A connection's first frame: RUNNING (again, after a restart's CREATED;
+    // a no-op while already RUNNING).
+    if (end->frames == 1 && source_->network()) {
       session_->Transition(v1::Session::RUNNING, Status::Ok(), "receiving the stream");
     }
     if (!Feed(frame)) return false;
@@ -197,6 +212,8 @@ void SessionRunner::Publish(const FrameRecord& frame, const PipelineStep* step) 
   std::optional<StepUpdates> updates;
   if (step != nullptr) updates = updates_.Next(*pipeline_, *step);
   std::vector<v1::SessionEvent> events;
+  StoreStep store_step;
+  v1::Session row;
   {
     std::lock_guard<std::mutex> lock(session_->mu);
     v1::SessionStats* st = session_->proto.mutable_stats();
@@ -207,7 +224,7 @@ void SessionRunner::Publish(const FrameRecord& frame, const PipelineStep* step) 
     st->set_stream_time_s(frame.timestamp_s);
     // Read only by a FINISHED ending without poses: not kept once there are poses
     // (the trajectory snapshot never empties again, a rescale refills it at once).
-    if (session_->trajectory.empty()) session_->no_pose_reason = NoPoseReason(step);
+    if (session_->points == 0) session_->no_pose_reason = NoPoseReason(step);
     if (step != nullptr) {
       ++pairs_;
       tracked_ += step->tracking;
@@ -215,13 +232,22 @@ void SessionRunner::Publish(const FrameRecord& frame, const PipelineStep* step) 
       st->set_tracked_pairs(tracked_);
       st->set_planes(static_cast<int>(pipeline_->plane_map().size()));
       *session_->proto.mutable_update_time() = TimeUtil::GetCurrentTime();
-      ApplyUpdatesLocked(*updates, &events);
+      ApplyUpdatesLocked(*updates, &events, &store_step);
+      row = session_->proto;
+      store_step.metric = session_->metric;
     }
   }
+  if (events.empty()) return;
   for (auto& e : events) {
     if (e.has_pose()) *e.mutable_pose()->mutable_emit_time() = PreciseNow();
-    session_->events->Append(std::move(e));
   }
+  // The step's points, planes, session row and events in one transaction,
+  // before watchers can see the events (server/store.h).
+  session_->events->AppendBatch(std::move(events), [&](const std::vector<v1::SessionEvent>& batch) {
+    row.set_last_sequence(batch.back().sequence());
+    store_step.session = &row;
+    session_->CommitStep(store_step, batch);
+  });
 }
 
 std::string SessionRunner::NoPoseReason(const PipelineStep* step) const {
@@ -236,17 +262,29 @@ std::string SessionRunner::NoPoseReason(const PipelineStep* step) const {
   return std::to_string(pairs_ + 1) + " anchor pair(s) but none tracked";
 }
 
-void SessionRunner::ApplyUpdatesLocked(const StepUpdates& u,
-                                       std::vector<v1::SessionEvent>* events) {
+void SessionRunner::ApplyUpdatesLocked(const StepUpdates& u, std::vector<v1::SessionEvent>* events,
+                                       StoreStep* step) {
   Session& s = *session_;
-  // Snapshots: a newly fixed scale rescales everything seen so far.
+  step->segment = s.segment;
+  // Snapshots: a newly fixed scale rescales everything seen so far (of this
+  // segment: the pipeline's own).
   if (u.rescaled) {
     s.metric = u.metric;
-    s.trajectory.clear();
-    s.planes.clear();
-    for (const auto& [id, mp] : *u.plane_map) s.planes[id] = api::MapPlaneToProto(mp);
+    step->replace_points = true;
+    step->replace_planes = true;
+    s.points -= segment_points_;
+    segment_points_ = 0;
+    for (const auto& [id, mp] : *u.plane_map) {
+      step->planes.push_back(api::MapPlaneToProto(mp));
+      step->planes.back().set_segment(s.segment);
+    }
   }
-  for (const TimedPose& p : u.new_points) s.trajectory.push_back(api::TimedPoseToProto(p));
+  for (const TimedPose& p : u.new_points) {
+    step->points.push_back(api::TimedPoseToProto(p));
+    step->points.back().set_segment(s.segment);
+  }
+  s.points += static_cast<int64_t>(u.new_points.size());
+  segment_points_ += static_cast<int64_t>(u.new_points.size());
 
   v1::SessionEvent pose;
   v1::PoseUpdate* pu = pose.mutable_pose();
@@ -262,7 +300,8 @@ void SessionRunner::ApplyUpdatesLocked(const StepUpdates& u,
   events->push_back(std::move(pose));
 
   for (const PlaneChange& c : u.planes) {
-    s.planes[c.track_id] = api::MapPlaneToProto(*c.plane);
+    step->planes.push_back(api::MapPlaneToProto(*c.plane));
+    step->planes.back().set_segment(s.segment);
     v1::SessionEvent e;
     v1::PlaneEvent* pe = e.mutable_plane();
     pe->set_kind(KindToProto(c.kind));

@@ -55,7 +55,10 @@ class SessionRunner {
   // closed no pair). Called before the step is counted.
   std::string NoPoseReason(const PipelineStep* step) const;
   // With the session's lock held: the snapshots and the events of a step.
-  void ApplyUpdatesLocked(const StepUpdates& updates, std::vector<v1::SessionEvent>* events);
+  // With the session's lock held: the step's events and what it writes to
+  // the store.
+  void ApplyUpdatesLocked(const StepUpdates& updates, std::vector<v1::SessionEvent>* events,
+                          StoreStep* step);
   // Ends the session after its stream broke off with `status`.
   void EndStream(const Status& status);
 
@@ -76,6 +79,7 @@ class SessionRunner {
   int64_t last_index_ = -1;        // of the last frame processed (offset)
   double last_timestamp_s_ = 0.0;  // of the last frame processed (offset)
   Clock::time_point last_frame_wall_;
+  int64_t segment_points_ = 0;  // trajectory points of this run's pipeline
 };
 
 }  // namespace slapse::server

@@ -320,6 +320,33 @@ void AddNameItems(SlapseClient* c, std::vector<Item>* items) {
                     [c] { return FromStatus(c->GetTrajectory("sessions/999999").status()); }});
   items->push_back({"UploadStream to unknown", I, StatusCode::kNotFound, "no session",
                     [c] { return FromStatus(c->UploadBytes("sessions/999999", "abc").status()); }});
+  // Paging of the snapshots (checked before the name).
+  auto trajectory_page = [c](int page_size, const std::string& token, double start_s,
+                             double end_s) {
+    return [=] {
+      v1::GetTrajectoryRequest r;
+      r.set_name("sessions/999999");
+      r.set_page_size(page_size);
+      r.set_page_token(token);
+      r.set_start_time_s(start_s);
+      r.set_end_time_s(end_s);
+      return FromStatus(c->GetTrajectoryPage(r).status());
+    };
+  };
+  items->push_back({"GetTrajectory page_size = -1", I, StatusCode::kInvalidArgument,
+                    "page_size must be >= 0", trajectory_page(-1, "", 0, 0)});
+  items->push_back({"GetTrajectory page_token 'x'", I, StatusCode::kInvalidArgument,
+                    "bad page_token 'x'", trajectory_page(10, "x", 0, 0)});
+  items->push_back({"GetTrajectory time range [5 s, 1 s)", I, StatusCode::kInvalidArgument,
+                    "the time range [start_time_s, end_time_s) must be finite and non-empty",
+                    trajectory_page(10, "", 5, 1)});
+  items->push_back(
+      {"GetPlaneMap page_token '-3'", I, StatusCode::kInvalidArgument, "bad page_token '-3'", [c] {
+         v1::GetPlaneMapRequest r;
+         r.set_name("sessions/999999");
+         r.set_page_token("-3");
+         return FromStatus(c->GetPlaneMapPage(r).status());
+       }});
   items->push_back({"WatchSession unknown", I, StatusCode::kNotFound, "no session", [c] {
                       return FromStatus(c->Watch("sessions/999999", 0,
                                                  [](const v1::SessionEvent&) { return true; }));

@@ -430,7 +430,33 @@ TEST_F(ServerTest, OverCapacityIsResourceExhausted) {
   (*small)->Shutdown();
 }
 
-TEST_F(ServerTest, CursorOlderThanTheRingIsOutOfRange) {
+StatusOr<std::unique_ptr<SlapseServer>> StartServerWithRetention(int64_t ttl_s) {
+  ServerOptions o;
+  o.address = "127.0.0.1";
+  o.port = 0;
+  o.sessions.event_ring_capacity = 4;
+  o.sessions.retention_ttl_s = ttl_s;
+  o.shutdown_grace_s = 1;
+  return SlapseServer::Start(o);
+}
+
+// Polls (bounded) until `name` is no longer CREATED / RUNNING.
+v1::Session WaitForEnd(SlapseClient& c, const std::string& name) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  v1::Session s;
+  do {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    auto got = c.GetSession(name);
+    if (!got.ok()) break;
+    s = *got;
+  } while ((s.state() == v1::Session::RUNNING || s.state() == v1::Session::CREATED) &&
+           std::chrono::steady_clock::now() < deadline);
+  return s;
+}
+
+// A ring of 4 events: a watch from the start reads the older ones from the
+// store (server/store.h), every event once and in order.
+TEST_F(ServerTest, CursorOlderThanTheRingReadsFromTheStore) {
   auto small = StartServer(1, /*ring=*/4);
   ASSERT_TRUE(small.ok()) << small.status().ToString();
   auto c =
@@ -438,30 +464,125 @@ TEST_F(ServerTest, CursorOlderThanTheRingIsOutOfRange) {
   auto created = c->CreateSession(UploadRequest());
   ASSERT_TRUE(created.ok());
   ASSERT_TRUE(c->UploadBytes(created->name(), *drive_).ok());
-  // Wait (bounded) for the end, then ask for the very first events.
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
-  v1::Session s;
-  do {
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    auto got = c->GetSession(created->name());
-    ASSERT_TRUE(got.ok());
-    s = *got;
-  } while (s.state() == v1::Session::RUNNING && std::chrono::steady_clock::now() < deadline);
+  const v1::Session s = WaitForEnd(*c, created->name());
   ASSERT_EQ(s.state(), v1::Session::FINISHED);
+  ASSERT_GT(s.last_sequence(), 20u);  // far beyond the ring
   std::vector<v1::SessionEvent> events;
   Status end = c->Watch(created->name(), 0, [&](const v1::SessionEvent& e) {
     events.push_back(e);
     return true;
   });
-  EXPECT_EQ(end.code(), StatusCode::kOutOfRange);
-  EXPECT_NE(end.message().find("snapshot"), std::string::npos) << end.message();
-  // The last events are still there.
-  end = c->Watch(created->name(), s.last_sequence() - 2, [&](const v1::SessionEvent& e) {
+  ASSERT_TRUE(end.ok()) << end.ToString();
+  ASSERT_EQ(events.size(), s.last_sequence());
+  for (size_t i = 0; i < events.size(); ++i) EXPECT_EQ(events[i].sequence(), i + 1);
+  EXPECT_EQ(events.front().state_change().state(), v1::Session::CREATED);
+  EXPECT_EQ(events.back().state_change().state(), v1::Session::FINISHED);
+  // From the middle: exactly the rest.
+  std::vector<v1::SessionEvent> rest;
+  end = c->Watch(created->name(), 7, [&](const v1::SessionEvent& e) {
+    rest.push_back(e);
+    return true;
+  });
+  ASSERT_TRUE(end.ok()) << end.ToString();
+  ASSERT_EQ(rest.size(), events.size() - 7);
+  for (size_t i = 0; i < rest.size(); ++i) {
+    EXPECT_EQ(rest[i].SerializeAsString(), events[7 + i].SerializeAsString());
+  }
+}
+
+// Pages of 7 (and time ranges) give exactly the unpaged trajectory.
+TEST_F(ServerTest, PagedTrajectoryEqualsTheWholeOne) {
+  auto created = client_->CreateSession(UploadRequest());
+  ASSERT_TRUE(created.ok());
+  ASSERT_TRUE(client_->UploadBytes(created->name(), *drive_).ok());
+  ASSERT_EQ(WaitForEnd(*client_, created->name()).state(), v1::Session::FINISHED);
+  v1::GetTrajectoryRequest whole;
+  whole.set_name(created->name());
+  auto all = client_->GetTrajectoryPage(whole);
+  ASSERT_TRUE(all.ok()) << all.status().ToString();
+  ASSERT_GT(all->points_size(), 10);
+  EXPECT_TRUE(all->next_page_token().empty());
+  v1::GetTrajectoryRequest paged = whole;
+  paged.set_page_size(7);
+  std::vector<v1::Trajectory::Point> pages;
+  int requests = 0;
+  do {
+    auto page = client_->GetTrajectoryPage(paged);
+    ASSERT_TRUE(page.ok()) << page.status().ToString();
+    ASSERT_LE(page->points_size(), 7);
+    for (const auto& p : page->points()) pages.push_back(p);
+    paged.set_page_token(page->next_page_token());
+    ++requests;
+  } while (!paged.page_token().empty() && requests < 1000);
+  ASSERT_EQ(static_cast<int>(pages.size()), all->points_size());
+  EXPECT_EQ(requests, (all->points_size() + 6) / 7);
+  for (size_t i = 0; i < pages.size(); ++i) {
+    EXPECT_EQ(pages[i].SerializeAsString(), all->points(static_cast<int>(i)).SerializeAsString());
+  }
+  // A time range: the points with start <= t < end, nothing else.
+  const double start_s = all->points(3).timestamp_s();
+  const double end_s = all->points(8).timestamp_s();
+  v1::GetTrajectoryRequest range = whole;
+  range.set_start_time_s(start_s);
+  range.set_end_time_s(end_s);
+  auto part = client_->GetTrajectoryPage(range);
+  ASSERT_TRUE(part.ok()) << part.status().ToString();
+  ASSERT_EQ(part->points_size(), 5);
+  EXPECT_EQ(part->points(0).SerializeAsString(), all->points(3).SerializeAsString());
+  // Bad paging is a precise error.
+  v1::GetTrajectoryRequest bad = whole;
+  bad.set_page_token("garbage");
+  EXPECT_EQ(client_->GetTrajectoryPage(bad).status().code(), StatusCode::kInvalidArgument);
+  bad = whole;
+  bad.set_page_size(-1);
+  EXPECT_EQ(client_->GetTrajectoryPage(bad).status().code(), StatusCode::kInvalidArgument);
+  bad = whole;
+  bad.set_start_time_s(5);
+  bad.set_end_time_s(1);
+  EXPECT_EQ(client_->GetTrajectoryPage(bad).status().code(), StatusCode::kInvalidArgument);
+}
+
+// --retention-ttl-s: a finished session's results go, the session says so
+// (EXPIRED, with a StateChange), a running one alongside is untouched.
+TEST_F(ServerTest, RetentionExpiresFinishedSessionsVisibly) {
+  auto server = StartServerWithRetention(1);
+  ASSERT_TRUE(server.ok()) << server.status().ToString();
+  auto c =
+      SlapseClient::Connect("127.0.0.1:" + std::to_string((*server)->port()), TestClientOptions());
+  auto finished = c->CreateSession(UploadRequest());
+  auto waiting = c->CreateSession(UploadRequest());  // CREATED: active, never expires
+  ASSERT_TRUE(finished.ok() && waiting.ok());
+  ASSERT_TRUE(c->UploadBytes(finished->name(), *drive_).ok());
+  // FINISHED, or already EXPIRED on a slow machine.
+  const v1::Session ended = WaitForEnd(*c, finished->name());
+  ASSERT_TRUE(ended.state() == v1::Session::FINISHED || ended.state() == v1::Session::EXPIRED)
+      << v1::Session::State_Name(ended.state());
+  v1::Session now;
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+  do {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    auto got = c->GetSession(finished->name());
+    ASSERT_TRUE(got.ok());
+    now = *got;
+  } while (now.state() != v1::Session::EXPIRED && std::chrono::steady_clock::now() < deadline);
+  ASSERT_EQ(now.state(), v1::Session::EXPIRED);
+  EXPECT_NE(now.state_message().find("retention"), std::string::npos) << now.state_message();
+  auto traj = c->GetTrajectory(finished->name());
+  EXPECT_EQ(traj.status().code(), StatusCode::kFailedPrecondition);
+  EXPECT_NE(traj.status().message().find("EXPIRED"), std::string::npos);
+  std::vector<v1::SessionEvent> events;
+  Status end = c->Watch(finished->name(), 0, [&](const v1::SessionEvent& e) {
     events.push_back(e);
     return true;
   });
-  EXPECT_TRUE(end.ok()) << end.ToString();
-  EXPECT_EQ(events.size(), 2u);
+  ASSERT_TRUE(end.ok()) << end.ToString();
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events[0].state_change().state(), v1::Session::EXPIRED);
+  EXPECT_EQ(events[0].sequence(), now.last_sequence());
+  EXPECT_GT(events[0].sequence(), 10u);  // after the session's own events
+  auto other = c->GetSession(waiting->name());
+  ASSERT_TRUE(other.ok());
+  EXPECT_EQ(other->state(), v1::Session::CREATED);
 }
 
 // grpc.health.v1.Health/Check without generated stubs: an empty request (all

@@ -43,7 +43,8 @@ int RunExport(int argc, char** argv) {
       ->capture_default_str();
   if (int rc = cl.Parse(argc, argv); rc >= 0) return rc;
   if (cl.positional().size() != 1) {
-    return Fail("export", "expected one SESSION, e.g. sessions/1 (see --help)", 2);
+    return Fail("export",
+                "expected one SESSION, e.g. sessions/3k7q... as create printed it (see --help)", 2);
   }
   if (format != "tum" && format != "kitti" && format != "json") {
     return Fail("export", "--format must be tum, kitti or json, not '" + format + "'", 2);

@@ -57,6 +57,8 @@ const char* StateName(v1::Session::State s) {
       return "FAILED";
     case v1::Session::STOPPED:
       return "STOPPED";
+    case v1::Session::EXPIRED:
+      return "EXPIRED";
     default:
       return "?";
   }
@@ -119,9 +121,24 @@ int RunServe(int argc, char** argv) {
                  "address RTSP push listeners bind and advertise")
       ->type_name("IPV4")
       ->capture_default_str();
+  // serve persists by default; the library's default (in memory) is for
+  // tests and embedding.
+  o.sessions.data_dir = server::DefaultDataDir();
+  app.add_option("--data-dir", o.sessions.data_dir,
+                 "where sessions and results persist (SQLite, slapse.db); ':memory:' keeps "
+                 "them in memory only (nothing survives a restart)")
+      ->type_name("DIR")
+      ->capture_default_str();
+  int64_t retention_ttl_s = o.sessions.retention_ttl_s;
+  app.add_option("--retention-ttl-s", retention_ttl_s,
+                 "a finished session's results are deleted this long after it ended (it "
+                 "becomes EXPIRED; 0: kept until deleted)")
+      ->type_name("S")
+      ->capture_default_str();
   if (int rc = ParseOrExit(cl, argc, argv, 0); rc >= 0) return rc;
   for (const Status& s :
-       {CheckRange("port", port, int64_t{0}, int64_t{65535}),
+       {CheckRange("retention-ttl-s", retention_ttl_s, int64_t{0}, int64_t{1} << 40),
+        CheckRange("port", port, int64_t{0}, int64_t{65535}),
         CheckRange("max-sessions", max_sessions, int64_t{1}, int64_t{1024}),
         CheckRange("max-upload-mb", max_upload_mb, int64_t{0}, int64_t{1} << 30),
         CheckRange("event-ring", ring, int64_t{1}, int64_t{1} << 24),
@@ -135,6 +152,7 @@ int RunServe(int argc, char** argv) {
   o.sessions.event_ring_capacity = static_cast<size_t>(ring);
   o.sessions.create_idle_timeout_ms = create_idle_s * 1000;
   o.sessions.upload_stall_timeout_ms = stall_s * 1000;
+  o.sessions.retention_ttl_s = retention_ttl_s;
 
   // Block the shutdown signals before gRPC starts its threads; wait for them below.
   sigset_t signals;
@@ -145,8 +163,9 @@ int RunServe(int argc, char** argv) {
 
   auto server = server::SlapseServer::Start(o);
   if (!server.ok()) return Fail("serve", server.status().message());
-  std::printf("slapse serving on %s:%d (max %d sessions; health + reflection on)\n",
-              o.address.c_str(), (*server)->port(), o.sessions.max_sessions);
+  std::printf("slapse serving on %s:%d (max %d sessions; data in %s; health + reflection on)\n",
+              o.address.c_str(), (*server)->port(), o.sessions.max_sessions,
+              o.sessions.data_dir.c_str());
   std::fflush(stdout);
   int sig = 0;
   sigwait(&signals, &sig);

@@ -90,18 +90,51 @@ StatusOr<v1::Session> SlapseClient::StopSession(const std::string& name) {
                                                     request);
 }
 
+StatusOr<v1::Trajectory> SlapseClient::GetTrajectoryPage(const v1::GetTrajectoryRequest& request) {
+  return Unary<v1::GetTrajectoryRequest, v1::Trajectory>(
+      &v1::SlapseService::StubInterface::GetTrajectory, request);
+}
+
+StatusOr<v1::PlaneMap> SlapseClient::GetPlaneMapPage(const v1::GetPlaneMapRequest& request) {
+  return Unary<v1::GetPlaneMapRequest, v1::PlaneMap>(&v1::SlapseService::StubInterface::GetPlaneMap,
+                                                     request);
+}
+
 StatusOr<v1::Trajectory> SlapseClient::GetTrajectory(const std::string& name) {
   v1::GetTrajectoryRequest request;
   request.set_name(name);
-  return Unary<v1::GetTrajectoryRequest, v1::Trajectory>(
-      &v1::SlapseService::StubInterface::GetTrajectory, request);
+  request.set_page_size(options_.page_size);
+  auto first = GetTrajectoryPage(request);
+  if (!first.ok()) return first;
+  v1::Trajectory out = std::move(*first);
+  // The first page's last_sequence: every later page is at least as new.
+  while (!out.next_page_token().empty()) {
+    request.set_page_token(out.next_page_token());
+    auto page = GetTrajectoryPage(request);
+    if (!page.ok()) return page.status();
+    for (auto& p : *page->mutable_points()) *out.add_points() = std::move(p);
+    out.set_metric(page->metric());
+    out.set_next_page_token(page->next_page_token());
+  }
+  return out;
 }
 
 StatusOr<v1::PlaneMap> SlapseClient::GetPlaneMap(const std::string& name) {
   v1::GetPlaneMapRequest request;
   request.set_name(name);
-  return Unary<v1::GetPlaneMapRequest, v1::PlaneMap>(&v1::SlapseService::StubInterface::GetPlaneMap,
-                                                     request);
+  request.set_page_size(options_.page_size);
+  auto first = GetPlaneMapPage(request);
+  if (!first.ok()) return first;
+  v1::PlaneMap out = std::move(*first);
+  while (!out.next_page_token().empty()) {
+    request.set_page_token(out.next_page_token());
+    auto page = GetPlaneMapPage(request);
+    if (!page.ok()) return page.status();
+    for (auto& p : *page->mutable_planes()) *out.add_planes() = std::move(p);
+    out.set_metric(page->metric());
+    out.set_next_page_token(page->next_page_token());
+  }
+  return out;
 }
 
 StatusOr<v1::Session> SlapseClient::Upload(const std::string& name,

@@ -30,6 +30,9 @@ struct ClientOptions {
   double watch_timeout_s = 0.0;
   // Bytes per UploadChunk.
   int upload_chunk_bytes = 256 << 10;
+  // Points (planes) per GetTrajectory (GetPlaneMap) page when fetching a
+  // whole snapshot: 20 000 points are ~2 MB, under gRPC's 4 MB message cap.
+  int page_size = 20000;
 };
 
 // grpc::Status -> slapse::Status (codes are numerically equal).
@@ -49,8 +52,12 @@ class SlapseClient {
                                                   v1::Session::State state);
   Status DeleteSession(const std::string& name);
   StatusOr<v1::Session> StopSession(const std::string& name);
+  // The whole snapshot, fetched page by page (any session length).
   StatusOr<v1::Trajectory> GetTrajectory(const std::string& name);
   StatusOr<v1::PlaneMap> GetPlaneMap(const std::string& name);
+  // One page (page_size, page_token, time range as the request says).
+  StatusOr<v1::Trajectory> GetTrajectoryPage(const v1::GetTrajectoryRequest& request);
+  StatusOr<v1::PlaneMap> GetPlaneMapPage(const v1::GetPlaneMapRequest& request);
 
   // Sends `bytes` / the file at `path` in chunks as the session's stream.
   StatusOr<v1::Session> UploadBytes(const std::string& name, const std::string& bytes);
