@@ -24,6 +24,10 @@ const char* PlaneKindName(PlaneKind kind) {
       return "facade";
     case PlaneKind::kBackground:
       return "background";
+    case PlaneKind::kGuardRail:
+      return "guard_rail";
+    case PlaneKind::kObject:
+      return "object";
   }
   return "unknown";
 }
@@ -117,6 +121,8 @@ StatusOr<PlaneKind> ParsePlaneKind(const std::string& kind, const std::string& w
   if (kind == "road") return PlaneKind::kRoad;
   if (kind == "facade") return PlaneKind::kFacade;
   if (kind == "background") return PlaneKind::kBackground;
+  if (kind == "guard_rail") return PlaneKind::kGuardRail;
+  if (kind == "object") return PlaneKind::kObject;
   return DataLossError(where + ": unknown kind '" + kind + "'");
 }
 

@@ -23,7 +23,9 @@
 
 namespace slapse {
 
-enum class PlaneKind { kRoad, kFacade, kBackground };
+// kGuardRail: the face of a guard rail's beam (a narrow vertical strip);
+// kObject: a planar face of a small object (a parked car's side, a kiosk).
+enum class PlaneKind { kRoad, kFacade, kBackground, kGuardRail, kObject };
 const char* PlaneKindName(PlaneKind kind);
 
 struct GtPlane {

@@ -36,6 +36,113 @@ int Scene::AddPlane(PlaneKind kind, const Eigen::Vector3d& normal_world,
   return plane.id;
 }
 
+const char* SceneKindName(SceneKind kind) {
+  switch (kind) {
+    case SceneKind::kUrban:
+      return "urban";
+    case SceneKind::kAvenue:
+      return "avenue";
+    case SceneKind::kRural:
+      return "rural";
+    case SceneKind::kHighway:
+      return "highway";
+    case SceneKind::kPlaza:
+      return "plaza";
+    case SceneKind::kIntersection:
+      return "intersection";
+  }
+  return "unknown";
+}
+
+StatusOr<SceneKind> ParseSceneKind(const std::string& name) {
+  for (int k = 0; k < kNumSceneKinds; ++k) {
+    if (name == SceneKindName(static_cast<SceneKind>(k))) return static_cast<SceneKind>(k);
+  }
+  return InvalidArgumentError("unknown scene kind '" + name +
+                              "' (urban, avenue, rural, highway, plaza or intersection)");
+}
+
+SceneOptions SceneOptionsFor(SceneKind kind) {
+  SceneOptions o;
+  o.kind = kind;
+  switch (kind) {
+    case SceneKind::kUrban:
+      break;
+    case SceneKind::kAvenue:  // wide, facades far behind two rows of dense trees
+      o.road_half_width_min_m = 6.0;
+      o.road_half_width_max_m = 8.0;
+      o.facade_offset_min_m = 14.0;
+      o.facade_offset_max_m = 20.0;
+      o.gap_probability = 0.1;
+      o.tree_spacing_min_m = 6.0;
+      o.tree_spacing_max_m = 9.0;
+      o.tree_probability = 0.95;
+      o.bend_radius_min_m = 40.0;
+      o.bend_radius_max_m = 80.0;
+      break;
+    case SceneKind::kRural:  // no buildings: fields to 50 m, scattered trees, rails
+      o.road_half_width_min_m = 3.0;
+      o.road_half_width_max_m = 3.6;
+      o.facade_offset_min_m = o.facade_offset_max_m = 50.0;  // the field's extent
+      o.setback_min_m = o.setback_max_m = 0.0;
+      o.bend_angle_min_deg = 10.0;
+      o.bend_angle_max_deg = 35.0;
+      o.bend_radius_min_m = 120.0;
+      o.bend_radius_max_m = 300.0;
+      o.straight_min_m = 20.0;
+      o.straight_max_m = 70.0;
+      o.tree_spacing_min_m = 5.0;
+      o.tree_spacing_max_m = 25.0;
+      o.tree_probability = 0.7;
+      o.tree_lateral_min_m = 2.5;
+      o.tree_lateral_max_m = 30.0;
+      break;
+    case SceneKind::kHighway:  // two carriageways, rails, fields, far trees, wide bends
+      o.road_half_width_min_m = 8.7;
+      o.road_half_width_max_m = 12.3;
+      o.facade_offset_min_m = o.facade_offset_max_m = 60.0;
+      o.setback_min_m = o.setback_max_m = 0.0;
+      o.bend_angle_min_deg = 3.0;
+      o.bend_angle_max_deg = 12.0;
+      o.bend_radius_min_m = 400.0;
+      o.bend_radius_max_m = 1200.0;
+      o.straight_min_m = 60.0;
+      o.straight_max_m = 200.0;
+      o.tree_spacing_min_m = 8.0;
+      o.tree_spacing_max_m = 40.0;
+      o.tree_probability = 0.6;
+      o.tree_lateral_min_m = 8.0;
+      o.tree_lateral_max_m = 40.0;
+      break;
+    case SceneKind::kPlaza:  // an open lot: stalls, cars, lamp posts, far buildings
+      o.road_half_width_min_m = 24.0;
+      o.road_half_width_max_m = 28.0;
+      o.facade_offset_min_m = 32.0;
+      o.facade_offset_max_m = 45.0;
+      o.gap_probability = 0.0;
+      o.bend_angle_min_deg = 15.0;
+      o.bend_angle_max_deg = 45.0;
+      o.bend_radius_min_m = 60.0;
+      o.bend_radius_max_m = 90.0;
+      o.straight_min_m = 30.0;
+      o.straight_max_m = 60.0;
+      o.trees = false;
+      break;
+    case SceneKind::kIntersection:  // city blocks joined by 90-degree corners
+      o.straight_min_m = 14.0;
+      o.straight_max_m = 30.0;
+      o.bend_angle_min_deg = o.bend_angle_max_deg = 90.0;
+      o.bend_radius_min_m = 20.0;
+      o.bend_radius_max_m = 26.0;
+      o.facade_offset_min_m = 7.0;
+      o.facade_offset_max_m = 9.0;
+      o.gap_probability = 0.3;
+      o.tree_probability = 0.4;
+      break;
+  }
+  return o;
+}
+
 namespace {
 
 // Radians per degree (angles.h: DegToRad(1) is exactly pi / 180). The path
@@ -163,17 +270,31 @@ class StreetBuilder {
   void BuildSide(int side);
   void BuildMarkings();
   void BuildTrees();
-  void AddTree(double s, double lateral);
+  void AddTree(double s, double lateral, double size = 1.0);
+  // The other kinds' parts (none of them draws from rng_ for kUrban).
+  void SetUpCrossSection();
+  void VaryAppearance();
+  void BuildGuardRails();
+  void AddGuardRail(double s0, double s1, double lateral, const Vector2d& towards_side);
+  void BuildParking();
+  // A box (footprint centred at xy, `length` along `yaw`, `width` across),
+  // z0..z1: its four sides and top as planes of `kind`, or as clutter when
+  // `planes` is false; each face gets its own texture (a copy of `tex`).
+  void AddBox(const Vector2d& xy, double yaw, double length, double width, double z0, double z1,
+              const TextureDesc& tex, bool planes, PlaneKind kind);
+  void AddClutterSurface(int texture, const Vector3d& origin, const Vector3d& u, const Vector3d& v,
+                         const Polygon& poly);
+  bool BuiltUp() const { return o_.kind != SceneKind::kRural && o_.kind != SceneKind::kHighway; }
   void AddRoadPlane();
   // A vertical rectangle a-b (world xy), height h, facing the point `towards`.
   int AddWall(PlaneKind kind, const Vector2d& a, const Vector2d& b, double h,
-              const Vector2d& towards, int texture);
+              const Vector2d& towards, int texture, double z0 = 0.0);
   int AddFacade(const Vector2d& a, const Vector2d& b, double h, const Vector2d& towards,
                 bool allow_shop);
   // Distant blocks on the vertical line through `centre` with horizontal
   // direction `along`, facing `towards`; width in metres.
   int AddBackground(const Vector2d& centre, const Vector2d& along, double width,
-                    const Vector2d& towards);
+                    const Vector2d& towards, bool windows = true);
   float Gain(const Vector3d& n) const {
     return static_cast<float>(0.8 + 0.28 * std::max(0.0, n.head<2>().dot(sun_)));
   }
@@ -190,6 +311,7 @@ class StreetBuilder {
   std::vector<Polygon> road_polygons_;
   std::vector<int> leaf_textures_;
   int bark_texture_ = -1;
+  int lanes_ = 1;  // kHighway: lanes per carriageway
 };
 
 Status StreetBuilder::Build() {
@@ -198,8 +320,10 @@ Status StreetBuilder::Build() {
   s_end_ = o_.length_m + 60.0;  // the usable street plus a closing stretch
   BuildCentreline();
   RoadStyle& road = sc.road;
+  sc.kind = o_.kind;
   road.half_width_m = rng_.Uniform(o_.road_half_width_min_m, o_.road_half_width_max_m);
   sc.lane_offset_m = -0.5 * road.half_width_m;
+  if (o_.kind != SceneKind::kUrban) SetUpCrossSection();
   road.s_begin_m = s_begin_;
   road.s_end_m = s_end_;
   for (int side = 0; side < 2; ++side) {
@@ -211,6 +335,7 @@ Status StreetBuilder::Build() {
   road.strip_left_m = base_offset_[1] + o_.setback_max_m + 1.0;
   const double sun_az = rng_.Uniform(0.0, 2.0 * M_PI);
   sun_ = Vector2d(std::cos(sun_az), std::sin(sun_az));
+  if (o_.appearance_variety) VaryAppearance();
 
   // Plane 0 is the road; its polygons are complete only after the side streets.
   TextureDesc road_tex;
@@ -240,14 +365,18 @@ Status StreetBuilder::Build() {
          To3(cl.Offset(b, road.strip_left_m)), To3(cl.Offset(a, road.strip_left_m))});
   }
 
-  BuildSide(0);
-  BuildSide(1);
-  // Close the street with distant blocks across its end.
+  if (BuiltUp()) {
+    BuildSide(0);
+    BuildSide(1);
+  }
+  // Close the street with distant blocks (a tree line without buildings) across its end.
   const Vector2d end = cl.Point(s_end_), t_end = cl.Tangent(s_end_);
   AddBackground(end, Vector2d(-t_end.y(), t_end.x()), road.strip_left_m + road.strip_right_m + 80.0,
-                end - t_end);
+                end - t_end, BuiltUp());
   BuildMarkings();
   if (o_.trees) BuildTrees();
+  if (o_.kind == SceneKind::kRural || o_.kind == SceneKind::kHighway) BuildGuardRails();
+  if (o_.kind == SceneKind::kPlaza) BuildParking();
   AddRoadPlane();
   return Status::Ok();
 }
@@ -270,18 +399,20 @@ void StreetBuilder::BuildCentreline() {
 }
 
 int StreetBuilder::AddWall(PlaneKind kind, const Vector2d& a, const Vector2d& b, double h,
-                           const Vector2d& towards, int texture) {
+                           const Vector2d& towards, int texture, double z0) {
   const Vector2d d = (b - a).normalized();
   Vector3d n(-d.y(), d.x(), 0.0);
   if (n.head<2>().dot(towards - a) < 0) n = -n;
   // Seen from the front: u runs right, v down.
   const Vector3d u_axis = (-n).cross(Vector3d::UnitZ());
   const Vector3d v_axis = -Vector3d::UnitZ();
-  const Vector3d A = To3(a), B = To3(b);
+  const Vector3d A = To3(a, z0), B = To3(b, z0);
   const Vector3d left = u_axis.dot(A) <= u_axis.dot(B) ? A : B;
-  const Polygon poly = {A, B, B + h * Vector3d::UnitZ(), A + h * Vector3d::UnitZ()};
+  // h is the top's height above the ground (the wall spans z0..h).
+  const Vector3d up = (h - z0) * Vector3d::UnitZ();
+  const Polygon poly = {A, B, B + up, A + up};
   scene_->textures[texture].gain = Gain(n);
-  return scene_->AddPlane(kind, n, {poly}, left + h * Vector3d::UnitZ(), u_axis, v_axis, texture);
+  return scene_->AddPlane(kind, n, {poly}, left + up, u_axis, v_axis, texture);
 }
 
 int StreetBuilder::AddFacade(const Vector2d& a, const Vector2d& b, double h,
@@ -297,9 +428,10 @@ int StreetBuilder::AddFacade(const Vector2d& a, const Vector2d& b, double h,
 }
 
 int StreetBuilder::AddBackground(const Vector2d& centre, const Vector2d& along, double width,
-                                 const Vector2d& towards) {
+                                 const Vector2d& towards, bool windows) {
   Scene& sc = *scene_;
   BackgroundStyle style;
+  style.windows = windows;
   for (double u = 0.0; u < width - 1e-6;) {
     const double w = std::min(rng_.Uniform(10.0, 30.0), width - u);
     BackgroundStyle::Block blk;
@@ -308,6 +440,10 @@ int StreetBuilder::AddBackground(const Vector2d& centre, const Vector2d& along, 
     blk.height_m = rng_.Uniform(18.0, 60.0);
     const float g = static_cast<float>(rng_.Uniform(110, 190));
     blk.bgr = Jitter(rng_, cv::Vec3f(g + 8, g, g - 6), 12);
+    if (!windows) {  // a tree line or hills: lower, green-grey
+      blk.height_m *= 0.3;
+      blk.bgr = Jitter(rng_, cv::Vec3f(0.55f * g, 0.75f * g, 0.6f * g), 10);
+    }
     style.blocks.push_back(blk);
     style.top_m = std::max(style.top_m, blk.height_m);
     u += w;
@@ -432,6 +568,13 @@ void StreetBuilder::BuildMarkings() {
   RoadStyle& road = scene_->road;
   const Centreline& cl = scene_->centreline;
   const double hw = road.half_width_m;
+  if (o_.kind == SceneKind::kRural || o_.kind == SceneKind::kHighway) return;  // lines only
+  if (o_.kind == SceneKind::kPlaza) {
+    for (double s = rng_.Uniform(10.0, 30.0); s < s_end_; s += rng_.Uniform(30.0, 60.0)) {
+      road.arrows.push_back({s, scene_->lane_offset_m, true});
+    }
+    return;
+  }
   for (double s = rng_.Uniform(50.0, 120.0); s < s_end_ - 20.0; s += rng_.Uniform(120.0, 220.0)) {
     road.crosswalk_s_m.push_back(s);
     road.arrows.push_back({s - 15.0, -0.5 * hw, true});
@@ -469,31 +612,32 @@ void StreetBuilder::BuildTrees() {
     const double sigma = side == 0 ? -1.0 : 1.0;
     for (double s = s_begin_ + rng_.Uniform(0.0, o_.tree_spacing_max_m); s < s_end_ - 5.0;
          s += rng_.Uniform(o_.tree_spacing_min_m, o_.tree_spacing_max_m)) {
-      const double lateral = sigma * (hw + sc.road.curb_m + rng_.Uniform(0.6, 1.0));
-      if (rng_.Bernoulli(o_.tree_probability)) AddTree(s, lateral);
+      const double lateral = sigma * (hw + sc.road.curb_m + sc.road.shoulder_m +
+                                      rng_.Uniform(o_.tree_lateral_min_m, o_.tree_lateral_max_m));
+      if (o_.kind == SceneKind::kUrban) {
+        if (rng_.Bernoulli(o_.tree_probability)) AddTree(s, lateral);
+        continue;
+      }
+      if (!rng_.Bernoulli(o_.tree_probability)) continue;
+      AddTree(s, lateral, rng_.Uniform(0.7, 1.4));
+      // The avenue's second row, in front of the facades.
+      if (o_.kind == SceneKind::kAvenue)
+        AddTree(s + rng_.Uniform(-2.0, 2.0), lateral + sigma * 4.0);
     }
   }
 }
 
-void StreetBuilder::AddTree(double s, double lateral) {
+void StreetBuilder::AddTree(double s, double lateral, double size) {
   Scene& sc = *scene_;
   const Vector3d base = To3(sc.centreline.Offset(s, lateral));
-  const double zc = rng_.Uniform(4.0, 5.0);
+  const double zc = size * rng_.Uniform(4.0, 5.0);
   // Keep the canopy clear of the camera in the right lane.
-  const double r_max = std::max(1.0, std::min(2.2, std::abs(lateral - sc.lane_offset_m) - 1.2));
+  const double r_max =
+      std::max(1.0, std::min(2.2 * size, std::abs(lateral - sc.lane_offset_m) - 1.2));
   const double rxy = rng_.Uniform(std::min(1.4, r_max), r_max);
-  const double rz = rng_.Uniform(1.2, 1.5);
+  const double rz = size * rng_.Uniform(1.2, 1.5);
   auto add_surface = [&](int texture, const Vector3d& origin, const Vector3d& u, const Vector3d& v,
-                         const Polygon& poly) {
-    Surface surf;
-    surf.label = kMbClutter;
-    surf.texture = texture;
-    surf.origin_world = origin;
-    surf.u_axis_world = u;
-    surf.v_axis_world = v;
-    surf.polygons_world = {poly};
-    sc.surfaces.push_back(surf);
-  };
+                         const Polygon& poly) { AddClutterSurface(texture, origin, u, v, poly); };
   // Trunk: a square prism up to the canopy centre.
   const double a = rng_.Uniform(0.12, 0.17), yaw = rng_.Uniform(0.0, 0.5 * M_PI);
   const Vector3d e1(std::cos(yaw), std::sin(yaw), 0.0), e2(-std::sin(yaw), std::cos(yaw), 0.0);
@@ -531,6 +675,223 @@ void StreetBuilder::AddTree(double s, double lateral) {
     const int variant = std::clamp(static_cast<int>(p.norm() * 4.0 + rng_.Uniform(0.0, 2.0)), 0, 5);
     // The leaf texture tile is 0.8 m square; the cluster sits at its centre.
     add_surface(leaf_textures_[variant], centre - 0.4 * u - 0.4 * v, u, v, hex);
+  }
+}
+
+void StreetBuilder::AddClutterSurface(int texture, const Vector3d& origin, const Vector3d& u,
+                                      const Vector3d& v, const Polygon& poly) {
+  Surface surf;
+  surf.label = kMbClutter;
+  surf.texture = texture;
+  surf.origin_world = origin;
+  surf.u_axis_world = u;
+  surf.v_axis_world = v;
+  surf.polygons_world = {poly};
+  scene_->surfaces.push_back(surf);
+}
+
+// The cross-section of the kinds other than kUrban (after the half width was drawn).
+void StreetBuilder::SetUpCrossSection() {
+  Scene& sc = *scene_;
+  RoadStyle& road = sc.road;
+  if (BuiltUp()) return;  // curbs and sidewalks as in the city
+  road.curb_m = 0.0;
+  road.verge = RoadStyle::Verge::kField;
+  road.shoulder_m = rng_.Uniform(0.4, 1.5);
+  road.field_row_m = rng_.Uniform(0.5, 1.2);
+  if (o_.kind == SceneKind::kRural) {
+    road.dash_period_m = rng_.Uniform(9.0, 15.0);
+    road.dash_length_m = rng_.Uniform(2.5, 4.5);
+    sc.lane_offset_m = -0.5 * road.half_width_m;
+    return;
+  }
+  // Highway: a 0.8 m median, lanes of 3.6 m, a hard shoulder up to the edge.
+  lanes_ = rng_.Bernoulli(0.5) ? 2 : 3;
+  const double median_m = 0.8, lane_m = 3.6;
+  road.half_width_m = median_m + lanes_ * lane_m + rng_.Uniform(0.8, 2.5);
+  road.dash_period_m = 18.0;
+  road.dash_length_m = 6.0;
+  road.dash_lateral_m.clear();
+  road.solid_lateral_m = {-median_m, median_m, -(median_m + lanes_ * lane_m),
+                          median_m + lanes_ * lane_m};
+  for (int k = 1; k < lanes_; ++k) {
+    road.dash_lateral_m.push_back(-(median_m + k * lane_m));
+    road.dash_lateral_m.push_back(median_m + k * lane_m);
+  }
+  sc.lane_offset_m = -(median_m + (rng_.UniformInt(0, lanes_ - 1) + 0.5) * lane_m);
+}
+
+// Road appearance, markings, light and sky from a random stream of their own.
+void StreetBuilder::VaryAppearance() {
+  Scene& sc = *scene_;
+  RoadStyle& road = sc.road;
+  SimRandom look(Mix64(o_.seed ^ 0x100C0FFEEULL));
+  Lighting& light = sc.lighting;
+  light.exposure = static_cast<float>(look.Uniform(0.7, 1.25));
+  for (int c = 0; c < 3; ++c) light.tint[c] = static_cast<float>(look.Uniform(0.94, 1.06));
+  if (look.Bernoulli(0.35)) {  // overcast
+    const int g = look.UniformInt(170, 225);
+    light.sky_horizon_bgr = cv::Vec3b(g, g, g);
+    light.sky_zenith_bgr = cv::Vec3b(g - 25, g - 22, g - 20);
+  } else {
+    light.sky_horizon_bgr =
+        cv::Vec3b(look.UniformInt(215, 245), look.UniformInt(205, 230), look.UniformInt(190, 220));
+    light.sky_zenith_bgr =
+        cv::Vec3b(look.UniformInt(180, 225), look.UniformInt(120, 170), look.UniformInt(70, 120));
+  }
+  const float a = static_cast<float>(look.Uniform(55, 115));
+  road.asphalt_bgr = cv::Vec3f(a, a + static_cast<float>(look.Uniform(-3, 4)),
+                               a + static_cast<float>(look.Uniform(-2, 8)));
+  road.grain = static_cast<float>(look.Uniform(0.5, 1.6));
+  road.paint_wear = static_cast<float>(look.Uniform(0.0, 0.6));
+  road.paint_bgr = look.Bernoulli(0.2) ? cv::Vec3f(70, 200, 230) : cv::Vec3f(222, 228, 232);
+  if (o_.kind != SceneKind::kHighway) {
+    road.dash_period_m *= look.Uniform(0.7, 1.3);
+    road.dash_length_m =
+        std::min(road.dash_length_m * look.Uniform(0.7, 1.3), 0.8 * road.dash_period_m);
+  }
+  static const cv::Vec3f kFields[] = {{60, 120, 95},   // grass
+                                      {70, 150, 175},  // stubble
+                                      {60, 85, 110},   // ploughed soil
+                                      {50, 105, 80}};  // meadow
+  road.field_bgr = kFields[look.UniformInt(0, 3)];
+}
+
+void StreetBuilder::BuildGuardRails() {
+  const RoadStyle& road = scene_->road;
+  const Centreline& cl = scene_->centreline;
+  const double edge = road.half_width_m + road.shoulder_m + 0.3;
+  for (int side = 0; side < 2; ++side) {
+    const double sigma = side == 0 ? -1.0 : 1.0;
+    if (o_.kind == SceneKind::kHighway) {  // continuous along both edges
+      AddGuardRail(s_begin_, s_end_, sigma * edge, Vector2d::Zero());
+      continue;
+    }
+    // Rural: stretches of rail (bends, embankments) with gaps between them.
+    for (double s = s_begin_ + rng_.Uniform(0.0, 40.0); s < s_end_ - 10.0;) {
+      const double len = rng_.Uniform(40.0, 160.0);
+      if (rng_.Bernoulli(0.6)) AddGuardRail(s, std::min(s + len, s_end_), sigma * edge, {});
+      s += len + rng_.Uniform(10.0, 80.0);
+    }
+  }
+  // The highway's median rail, facing the carriageway the camera drives on.
+  if (o_.kind == SceneKind::kHighway) AddGuardRail(s_begin_, s_end_, -0.45, {});
+  (void)cl;
+}
+
+// Rail pieces (chords of the offset curve within 2 cm of it), beam face from
+// 0.45 to 0.75 m, facing the centreline; posts every 2-4 m behind the beam.
+void StreetBuilder::AddGuardRail(double s0, double s1, double lateral, const Vector2d&) {
+  Scene& sc = *scene_;
+  const Centreline& cl = sc.centreline;
+  const double out = lateral > 0 ? 1.0 : -1.0;
+  const double face = lateral;  // the beam's face
+  TextureDesc metal;
+  metal.kind = TextureKind::kMetal;
+  metal.texel_m = 0.01;
+  metal.tile_texels = 128;
+  const float g = static_cast<float>(rng_.Uniform(140, 185));
+  metal.base_bgr = cv::Vec3f(g + 4, g + 2, g);
+  for (double s = s0; s < s1 - 0.5;) {
+    double len = std::min(12.0, s1 - s);
+    while (len > 1.0 && ChordDeviation(cl, s, s + len, face) > 0.02) len *= 0.7;
+    const Vector2d a = cl.Offset(s, face), b = cl.Offset(s + len, face);
+    const Vector2d towards = cl.Offset(s + 0.5 * len, face - out * 5.0);
+    metal.seed = HashCombine(o_.seed, 0x4A11ULL + sc.textures.size());
+    AddWall(PlaneKind::kGuardRail, a, b, 0.75, towards, sc.AddTexture(metal), 0.45);
+    s += len;
+  }
+  TextureDesc post;
+  post.kind = TextureKind::kPaint;
+  post.texel_m = 0.01;
+  post.tile_texels = 64;
+  post.base_bgr = metal.base_bgr * 0.6f;
+  const double spacing = rng_.Uniform(2.0, 4.0);
+  for (double s = s0 + 0.5 * spacing; s < s1; s += spacing) {
+    post.seed = HashCombine(o_.seed, 0x9057ULL + static_cast<uint64_t>(s * 100));
+    AddBox(cl.Offset(s, face + out * 0.12), cl.Heading(s), 0.12, 0.12, 0.0, 0.72, post,
+           /*planes=*/false, PlaneKind::kObject);
+  }
+}
+
+// The lot: stalls both sides of the aisle, parked cars (boxes whose faces are
+// planes of kind kObject), lamp posts (clutter).
+void StreetBuilder::BuildParking() {
+  Scene& sc = *scene_;
+  RoadStyle& road = sc.road;
+  const Centreline& cl = sc.centreline;
+  sc.lane_offset_m = -2.0;
+  road.dash_lateral_m.clear();
+  road.stall_lateral_min_m = 5.0;
+  road.stall_lateral_max_m = 10.0;
+  road.stall_period_m = rng_.Uniform(2.4, 2.8);
+  static const cv::Vec3f kCar[] = {{40, 40, 40},   {200, 200, 200}, {60, 60, 160},
+                                   {140, 80, 40},  {150, 150, 150}, {30, 90, 30},
+                                   {40, 140, 200}, {235, 235, 235}};
+  TextureDesc paint;
+  paint.kind = TextureKind::kPaint;
+  paint.texel_m = 0.02;
+  paint.tile_texels = 128;
+  paint.style = 1;  // car: a dark window band near the top of the sides
+  for (int side = 0; side < 2; ++side) {
+    const double sigma = side == 0 ? -1.0 : 1.0;
+    for (double s = s_begin_ + 10.0 + 0.5 * road.stall_period_m; s < s_end_ - 10.0;
+         s += road.stall_period_m) {
+      if (!rng_.Bernoulli(0.55)) continue;
+      const double lateral = sigma * rng_.Uniform(7.2, 7.8);
+      paint.seed = HashCombine(o_.seed, 0xCA40ULL + sc.textures.size());
+      paint.base_bgr = Jitter(rng_, kCar[rng_.UniformInt(0, 7)], 8);
+      AddBox(cl.Offset(s, lateral), cl.Heading(s) + M_PI / 2 + rng_.Uniform(-0.05, 0.05),
+             rng_.Uniform(4.1, 4.8), rng_.Uniform(1.7, 1.9), 0.0, rng_.Uniform(1.35, 1.6), paint,
+             /*planes=*/true, PlaneKind::kObject);
+    }
+  }
+  TextureDesc pole;
+  pole.kind = TextureKind::kPaint;
+  pole.texel_m = 0.01;
+  pole.tile_texels = 64;
+  pole.base_bgr = cv::Vec3f(110, 115, 120);
+  for (double s = s_begin_ + rng_.Uniform(5.0, 20.0); s < s_end_; s += rng_.Uniform(18.0, 30.0)) {
+    for (double sigma : {-1.0, 1.0}) {
+      pole.seed = HashCombine(o_.seed, 0x90E0ULL + sc.textures.size());
+      AddBox(cl.Offset(s, sigma * 12.0), cl.Heading(s), 0.18, 0.18, 0.0, 6.0, pole,
+             /*planes=*/false, PlaneKind::kObject);
+    }
+  }
+}
+
+void StreetBuilder::AddBox(const Vector2d& xy, double yaw, double length, double width, double z0,
+                           double z1, const TextureDesc& tex, bool planes, PlaneKind kind) {
+  Scene& sc = *scene_;
+  const Vector2d e1(std::cos(yaw), std::sin(yaw)), e2(-std::sin(yaw), std::cos(yaw));
+  const double hl = 0.5 * length, hw = 0.5 * width;
+  const Vector2d c[4] = {xy + hl * e1 + hw * e2, xy - hl * e1 + hw * e2, xy - hl * e1 - hw * e2,
+                         xy + hl * e1 - hw * e2};
+  for (int k = 0; k < 4; ++k) {  // sides, facing out
+    const Vector2d& a = c[k];
+    const Vector2d& b = c[(k + 1) % 4];
+    const Vector2d mid = 0.5 * (a + b);
+    const int t = sc.AddTexture(tex);
+    if (planes) {
+      AddWall(kind, a, b, z1, mid + (mid - xy), t, z0);
+      continue;
+    }
+    Vector3d n = To3(mid - xy).normalized();
+    sc.textures[t].gain = Gain(n);
+    const Vector3d u = (-n).cross(Vector3d::UnitZ());
+    const Vector3d A = To3(a, z0), B = To3(b, z0), up(0, 0, z1 - z0);
+    const Vector3d left = u.dot(A) <= u.dot(B) ? A : B;
+    AddClutterSurface(t, left + up, u, -Vector3d::UnitZ(), {A, B, B + up, A + up});
+  }
+  // Top: u along e1, v along -e2 (u x v = -z: seen from above).
+  const Polygon top = {To3(c[0], z1), To3(c[1], z1), To3(c[2], z1), To3(c[3], z1)};
+  const int t = sc.AddTexture(tex);
+  sc.textures[t].gain = 1.1f;
+  const Vector3d origin = To3(c[1], z1), u = To3(e1), v = -To3(e2);
+  if (planes) {
+    sc.AddPlane(kind, Vector3d::UnitZ(), {top}, origin, u, v, t);
+  } else {
+    AddClutterSurface(t, origin, u, v, top);
   }
 }
 

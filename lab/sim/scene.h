@@ -10,18 +10,35 @@
 #pragma once
 
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
 
 #include "core/common/status.h"
-#include "lab/sim/centreline.h"
 #include "lab/gt/ground_truth.h"
+#include "lab/sim/centreline.h"
 
 namespace slapse {
 
-enum class TextureKind { kRoad, kFacade, kBackground, kLeaves, kBark, kChecker };
+// kMetal: a guard rail's beam (bands along u, bolts, rust); kPaint: a plain
+// painted surface of colour `base_bgr` with grain (car bodies, posts).
+enum class TextureKind { kRoad, kFacade, kBackground, kLeaves, kBark, kChecker, kMetal, kPaint };
+
+// What a simulated drive passes through (lab/sim/scene.cc, docs/TRAJECTORY.md):
+//   kUrban        the street canyon: facades 7-11 m from the centreline, trees at the curbs
+//   kAvenue       wide street, facades 14-20 m away behind two rows of dense trees
+//   kRural        two-lane road without buildings: fields, scattered trees, guard rails
+//   kHighway      two carriageways of 2-3 lanes, guard rails, fields, far trees, wide bends
+//   kPlaza        open parking lot: parking stalls, parked cars (boxes), lamp posts,
+//                 buildings 30-45 m away
+//   kIntersection city streets joined by 90-degree turns at street corners
+enum class SceneKind { kUrban, kAvenue, kRural, kHighway, kPlaza, kIntersection };
+constexpr int kNumSceneKinds = 6;
+// "urban", "avenue", "rural", "highway", "plaza", "intersection".
+const char* SceneKindName(SceneKind kind);
+StatusOr<SceneKind> ParseSceneKind(const std::string& name);
 
 struct TextureDesc {
   TextureKind kind = TextureKind::kChecker;
@@ -39,6 +56,8 @@ struct TextureDesc {
   double checker_m = 0.5;
   cv::Vec3b checker_dark{20, 20, 20};
   cv::Vec3b checker_light{235, 235, 235};
+  // kPaint and kMetal: the base colour.
+  cv::Vec3f base_bgr{160, 160, 160};
 };
 
 struct Surface {
@@ -85,6 +104,8 @@ struct BackgroundStyle {
   };
   double top_m = 60.0;
   std::vector<Block> blocks;
+  // False: a tree line or hills (no window grid, more texture noise).
+  bool windows = true;
 };
 
 struct RoadStyle {
@@ -109,10 +130,40 @@ struct RoadStyle {
   // Road texture frame (copied from the road surface): world xy of (u, v).
   Eigen::Vector2d origin_xy = Eigen::Vector2d::Zero();
   Eigen::Vector2d u_xy = Eigen::Vector2d::UnitX(), v_xy = -Eigen::Vector2d::UnitY();
+  // Appearance (the defaults are the urban street's). Beyond the curb: paved
+  // sidewalk (kSidewalk) or, without a curb, a gravel shoulder of shoulder_m
+  // and then grass / ploughed field (kField).
+  enum class Verge { kSidewalk, kField };
+  Verge verge = Verge::kSidewalk;
+  double shoulder_m = 0.0;
+  cv::Vec3f asphalt_bgr{84, 86, 88};
+  cv::Vec3f paint_bgr{222, 228, 232};
+  cv::Vec3f field_bgr{60, 120, 95};  // kField: the field's mean colour
+  double field_row_m = 0.8;          // kField: furrow spacing
+  float grain = 1.0f;                // scale of the asphalt's noise
+  float paint_wear = 0.0f;           // 0: fresh markings, 1: mostly worn off
+  // Dashed lines at these lateral offsets (the centre line by default) and
+  // solid lines; the edge lines at |l| = half_width - 0.3..0.45 are always drawn.
+  std::vector<double> dash_lateral_m = {0.0};
+  std::vector<double> solid_lateral_m;
+  // Parking stalls: lines across the lot every stall_period_m where
+  // stall_lateral_min_m <= |l| <= stall_lateral_max_m (none when max <= min).
+  double stall_lateral_min_m = 0.0, stall_lateral_max_m = 0.0, stall_period_m = 2.6;
+};
+
+// The light of a scene: a global exposure and colour tint applied to every
+// texture, and the sky (lab/sim/renderer.h RenderOptions' defaults).
+struct Lighting {
+  float exposure = 1.0f;
+  cv::Vec3f tint{1.0f, 1.0f, 1.0f};
+  cv::Vec3b sky_horizon_bgr{232, 222, 212};
+  cv::Vec3b sky_zenith_bgr{205, 150, 100};
 };
 
 struct Scene {
   uint64_t seed = 0;
+  SceneKind kind = SceneKind::kUrban;
+  Lighting lighting;
   Centreline centreline;
   RoadStyle road;
   double lane_offset_m = -2.5;  // lateral offset of the right lane's centre (< 0: right)
@@ -133,6 +184,12 @@ struct Scene {
 
 struct SceneOptions {
   uint64_t seed = 1;
+  // The layout; the ranges below are the urban street's. SceneOptionsFor(kind)
+  // gives each kind's ranges.
+  SceneKind kind = SceneKind::kUrban;
+  // Vary road appearance, markings, lighting and sky with the seed (drawn
+  // from a stream of their own: the geometry of a seed does not change).
+  bool appearance_variety = false;
   // Centreline: straights and circular bends, starting and ending with a straight.
   double length_m = 500.0;  // at least this much street
   double straight_min_m = 30.0, straight_max_m = 80.0;
@@ -153,11 +210,16 @@ struct SceneOptions {
   double tree_spacing_min_m = 9.0, tree_spacing_max_m = 18.0;
   double tree_probability = 0.6;  // per slot
   int leaves_per_tree = 160;
+  // Where trees stand: beyond the curb by this much (|lateral| - half width - curb).
+  double tree_lateral_min_m = 0.6, tree_lateral_max_m = 1.0;
   // Texture resolution (metres per level-0 texel).
   double road_texel_m = 0.02, facade_texel_m = 0.025, background_texel_m = 0.1;
 };
 
-// Generates a street deterministically from options.seed.
+// Each kind's ranges (seed 1, appearance_variety off); kUrban: SceneOptions{}.
+SceneOptions SceneOptionsFor(SceneKind kind);
+
+// Generates a scene of options.kind deterministically from options.seed.
 StatusOr<Scene> GenerateStreetScene(const SceneOptions& options);
 
 }  // namespace slapse

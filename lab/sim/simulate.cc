@@ -5,9 +5,12 @@
 #include <filesystem>
 #include <fstream>
 
+#include <opencv2/imgproc.hpp>
+
 #include "core/common/json_io.h"
 #include "core/common/timing.h"
 #include "lab/gt/ground_truth.h"
+#include "lab/sim/random.h"
 
 namespace slapse {
 
@@ -37,6 +40,10 @@ Status WriteMeta(const SimulateOptions& o, const EncoderOptions& eo, const Drive
   meta["min_speed_mps"] = o.min_speed_mps;
   meta["max_speed_mps"] = o.max_speed_mps;
   meta["trees"] = o.trees;
+  meta["scene_kind"] = SceneKindName(o.scene_kind);
+  meta["appearance_variety"] = o.appearance_variety;
+  meta["blur_px"] = o.blur_px;
+  meta["sensor_noise"] = o.sensor_noise;
   meta["supersampling"] = o.supersampling;
   meta["camera_height_m"] = drive.path.camera_height_m;
   meta["pitch_down_deg"] = drive.path.pitch_down_deg;
@@ -50,6 +57,19 @@ Status WriteMeta(const SimulateOptions& o, const EncoderOptions& eo, const Drive
   out.close();
   if (!out) return DataLossError("failed writing " + meta_path.string());
   return Status::Ok();
+}
+
+// Blur and sensor noise (SimulateOptions::blur_px, sensor_noise) on a rendered frame.
+void ApplyCameraOptics(const SimulateOptions& o, size_t frame, cv::Mat* bgr) {
+  if (o.blur_px > 0) cv::GaussianBlur(*bgr, *bgr, cv::Size(0, 0), o.blur_px);
+  if (o.sensor_noise > 0) {
+    cv::Mat noise(bgr->size(), CV_16SC3);
+    cv::RNG rng(Mix64(o.seed ^ (0x5E45ULL + frame)));
+    rng.fill(noise, cv::RNG::NORMAL, 0.0, o.sensor_noise);
+    cv::Mat sum;
+    cv::add(*bgr, noise, sum, cv::noArray(), CV_16SC3);
+    sum.convertTo(*bgr, CV_8UC3);
+  }
 }
 
 }  // namespace
@@ -72,6 +92,8 @@ Status SimulateDrive(const SimulateOptions& o, SimulateReport* report) {
 
   RenderOptions ro;
   ro.supersampling = o.supersampling;
+  ro.sky_horizon_bgr = drive.scene.lighting.sky_horizon_bgr;
+  ro.sky_zenith_bgr = drive.scene.lighting.sky_zenith_bgr;
   auto renderer_or = Renderer::Create(drive.scene, drive.intrinsics, ro);
   if (!renderer_or.ok()) return renderer_or.status();
   Renderer& renderer = **renderer_or;
@@ -91,6 +113,7 @@ Status SimulateDrive(const SimulateOptions& o, SimulateReport* report) {
   for (size_t i = 0; i < n; ++i) {
     const auto t0 = Clock::now();
     SLAPSE_RETURN_IF_ERROR(renderer.Render(drive.path.world_from_cam[i], &frame));
+    ApplyCameraOptics(o, i, &frame.bgr);
     const auto t1 = Clock::now();
     SLAPSE_RETURN_IF_ERROR(encoder.Write(frame.bgr));
     const auto t2 = Clock::now();

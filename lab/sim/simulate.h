@@ -13,9 +13,9 @@
 #include <cstdint>
 #include <string>
 
-#include "lab/codec/video_encoder.h"
 #include "core/common/camera.h"
 #include "core/common/status.h"
+#include "lab/codec/video_encoder.h"
 #include "lab/sim/camera_path.h"
 #include "lab/sim/renderer.h"
 #include "lab/sim/scene.h"
@@ -31,6 +31,19 @@ struct SimulateOptions {
   double min_speed_mps = 25.0 / 3.6, max_speed_mps = 50.0 / 3.6;
   bool trees = true;
   int supersampling = 2;
+  // The scene's layout (lab/sim/scene.h SceneKind; its ranges from
+  // SceneOptionsFor) and whether its look varies with the seed.
+  SceneKind scene_kind = SceneKind::kUrban;
+  bool appearance_variety = false;
+  // The camera's height above the road and its fixed downward pitch (negative:
+  // up), each drawn uniformly from its range by the path's seed.
+  double camera_height_min_m = 1.3, camera_height_max_m = 1.6;
+  double pitch_down_min_deg = 2.0, pitch_down_max_deg = 5.0;
+  // The camera's optics and sensor after rendering: a Gaussian blur (sigma,
+  // output pixels; 0: none) and additive Gaussian noise per pixel and channel
+  // (sigma, 8-bit levels; 0: none; seeded per frame from the seed).
+  double blur_px = 0.0;
+  double sensor_noise = 0.0;
   // Encoder settings; its fps is replaced by `fps`.
   EncoderOptions encoder;
   std::string output_dir;

@@ -484,9 +484,22 @@ RoadGrid MakeRoadGrid(const RoadStyle& r, const Centreline& cl, const SampleGrid
 // edge lines, crosswalks with their stop lines, and arrows.
 float RoadMarkings(const RoadStyle& r, double s, double l, double st) {
   const double hw = r.half_width_m, al = std::abs(l);
-  float m = static_cast<float>(IntervalCoverage(l, -0.06, 0.06, st) *
-                               StripeCoverage(s, r.dash_period_m, r.dash_length_m, st));
+  float m = 0.0f;
+  for (double x : r.dash_lateral_m) {
+    m = std::max(m, static_cast<float>(IntervalCoverage(l - x, -0.06, 0.06, st) *
+                                       StripeCoverage(s, r.dash_period_m, r.dash_length_m, st)));
+  }
+  for (double x : r.solid_lateral_m) {
+    m = std::max(m, static_cast<float>(IntervalCoverage(l - x, -0.075, 0.075, st)));
+  }
   m = std::max(m, static_cast<float>(IntervalCoverage(al, hw - 0.45, hw - 0.3, st)));
+  if (r.stall_lateral_max_m > r.stall_lateral_min_m) {  // parking stalls across the lot
+    const double in = IntervalCoverage(al, r.stall_lateral_min_m, r.stall_lateral_max_m, st);
+    m = std::max(m, static_cast<float>(in * StripeCoverage(s, r.stall_period_m, 0.12, st)));
+    m = std::max(m, static_cast<float>(IntervalCoverage(s, r.s_begin_m, r.s_end_m, st) *
+                                       IntervalCoverage(al, r.stall_lateral_max_m - 0.12,
+                                                        r.stall_lateral_max_m, st)));
+  }
   for (double sc : r.crosswalk_s_m) {
     if (s < sc - 3.0 || s > sc + 7.0) continue;
     const double inside = IntervalCoverage(l, -hw + 0.3, hw - 0.3, st);
@@ -528,6 +541,19 @@ void DrawManhole(const RoadStyle::Manhole& mh, const Eigen::Vector2d& p, double 
   *c = Mix(*c, metal, cov);
 }
 
+// Beyond a road without curbs, q metres from the asphalt's edge: a gravel
+// shoulder, then the field (furrows in a fixed world direction, patches).
+Vec3f VergeColour(const RoadStyle& r, double q, double u, double v, double st, float hu,
+                  float patch) {
+  if (q < r.shoulder_m) {
+    const Vec3f gravel(105, 118, 128);
+    return gravel * (0.8f + 0.4f * hu);
+  }
+  const double furrow = StripeCoverage(0.8 * u + 0.6 * v, r.field_row_m, 0.35 * r.field_row_m, st);
+  return r.field_bgr * static_cast<float>((1.0 + patch) * (1.0 - 0.3 * furrow)) *
+         (0.85f + 0.3f * hu);
+}
+
 void RoadTexture(const Scene& scene, const TextureDesc& d, const SampleGrid& g, cv::Mat3f* img) {
   const RoadStyle& r = scene.road;
   const Centreline& cl = scene.centreline;
@@ -565,8 +591,15 @@ void RoadTexture(const Scene& scene, const TextureDesc& d, const SampleGrid& g, 
     if ((m.xy - centre).norm() < tile_r + m.radius_m + 0.1) manholes.push_back(&m);
   }
 
-  const Vec3f asphalt(84, 86, 88), canyon_asphalt(92, 92, 92), curb(165, 168, 170);
-  const Vec3f paving(148, 160, 168), joint(92, 96, 100), paint(222, 228, 232);
+  const Vec3f asphalt(r.asphalt_bgr), canyon_asphalt(92, 92, 92), curb(165, 168, 170);
+  const Vec3f paving(148, 160, 168), joint(92, 96, 100), paint(r.paint_bgr);
+  cv::Mat1f field;  // kField verges: patches and clumps
+  if (r.verge == RoadStyle::Verge::kField) {
+    field = cv::Mat1f(g.height, g.width, 0.0f);
+    AddValueNoise(g, seed ^ 0xF1E1, 3.0, 3.0, 0.18f, &field);
+    AddValueNoise(g, seed ^ 0xF1E2, 0.3, 0.3, 0.15f, &field);
+    AddValueNoise(g, seed ^ 0xF1E3, 0.08, 0.08, 0.12f, &field);
+  }
   for (int j = 0; j < g.height; ++j) {
     const double fy = static_cast<double>(j) / kStep;
     const int y0 = std::min(static_cast<int>(fy), ch - 2);
@@ -603,8 +636,10 @@ void RoadTexture(const Scene& scene, const TextureDesc& d, const SampleGrid& g, 
           const double tr = std::min({std::abs(al - (lane - 0.8)), std::abs(al - (lane + 0.8))});
           c *= static_cast<float>(1.0 - 0.1 * std::max(0.0, 1.0 - tr / 0.35));
           const float m = RoadMarkings(r, s, l, st);
-          if (m > 0.0f) c = Mix(c, paint, m * Clamp01(0.8f + 0.6f * wr[i]));
+          if (m > 0.0f) c = Mix(c, paint, m * Clamp01(0.8f + 0.6f * wr[i] - 1.5f * r.paint_wear));
         }
+      } else if (r.verge == RoadStyle::Verge::kField) {
+        c = VergeColour(r, al - hw, u, v, st, hu, field(j, i));
       } else if (al < hw + r.curb_m) {
         c = curb * static_cast<float>(1.0 - 0.4 * StripeCoverage(s, 1.0, 0.015, st));
       } else {
@@ -617,7 +652,8 @@ void RoadTexture(const Scene& scene, const TextureDesc& d, const SampleGrid& g, 
         c = Mix(paving * shade, joint, static_cast<float>(jt));
       }
       for (const auto* mh : manholes) DrawManhole(*mh, world(u, v), st, &c);
-      row[i] = (c + Vec3f(n[i], n[i], n[i])) * d.gain;
+      const float nl = n[i] * r.grain;
+      row[i] = (c + Vec3f(nl, nl, nl)) * d.gain;
     }
   }
 }
@@ -641,14 +677,15 @@ void BackgroundTexture(const Scene& scene, const TextureDesc& d, const SampleGri
       const BackgroundStyle::Block& blk = b.blocks[k];
       Vec3f c = blk.bgr;
       const double wu = u - blk.u0_m - 0.8, wz = z - 1.2;
-      const double cov = StripeCoverage(wu, 2.6, 1.3, st) * StripeCoverage(wz, 3.3, 1.5, st);
+      const double cov =
+          b.windows ? StripeCoverage(wu, 2.6, 1.3, st) * StripeCoverage(wz, 3.3, 1.5, st) : 0.0;
       if (cov > 0.0) {
         const uint64_t h = Hash3(d.seed, static_cast<int64_t>(std::floor(wu / 2.6)),
                                  static_cast<int64_t>(std::floor(wz / 3.3)), k);
         const Vec3f win = HashUnit(h) < 0.15f ? Vec3f(120, 190, 225) : c * 0.45f;
         c = Mix(c, win, static_cast<float>(cov));
       }
-      if (z > blk.height_m - 1.0) c *= 1.15f;
+      if (b.windows && z > blk.height_m - 1.0) c *= 1.15f;
       row[i] = Mix(c, haze, 0.35f);
     }
   }
@@ -704,6 +741,51 @@ void BarkTexture(const TextureDesc& d, const SampleGrid& g, cv::Mat3f* img) {
   }
 }
 
+// A guard rail's beam: u along the rail, v down from its top edge (0.3 m):
+// two crests and a groove, bolts every 2 m, joints every 4 m, dirt and rust.
+void MetalTexture(const TextureDesc& d, const SampleGrid& g, cv::Mat3f* img) {
+  cv::Mat1f dirt(g.height, g.width, 0.0f);
+  AddValueNoise(g, d.seed ^ 0x601, 0.6, 0.1, 0.15f, &dirt);
+  AddValueNoise(g, d.seed ^ 0x602, 0.08, 0.04, 0.12f, &dirt);
+  AddWhiteNoise(g, d.seed ^ 0x603, d.texel_m, 0.05f, &dirt);
+  const Vec3f base(d.base_bgr), rust(40, 70, 120), dark = base * 0.35f;
+  const double st = g.step_m;
+  for (int j = 0; j < g.height; ++j) {
+    const double v = g.v0_m + j * st;
+    const float shade = static_cast<float>(1.0 + 0.22 * std::cos(2.0 * M_PI * v / 0.15));
+    Vec3f* row = img->ptr<Vec3f>(j);
+    for (int i = 0; i < g.width; ++i) {
+      const double u = g.u0_m + i * st;
+      Vec3f c = base * shade * (1.0f + dirt(j, i));
+      if (dirt(j, i) > 0.17f) c = Mix(c, rust, Clamp01((dirt(j, i) - 0.17f) / 0.1f));
+      const double joint = StripeCoverage(u, 4.0, 0.02, st);
+      const double bolt =
+          StripeCoverage(u + 0.02, 2.0, 0.04, st) * IntervalCoverage(v, 0.13, 0.17, st);
+      c = Mix(c, dark, static_cast<float>(std::max(joint, bolt)));
+      row[i] = c * d.gain;
+    }
+  }
+}
+
+// A painted surface: base colour with grain and dirt; style 1 (a car's side)
+// adds a dark window band from 0.05 to 0.5 m below the top.
+void PaintTexture(const TextureDesc& d, const SampleGrid& g, cv::Mat3f* img) {
+  cv::Mat1f a(g.height, g.width, 0.0f);
+  AddValueNoise(g, d.seed ^ 0x701, 0.5, 0.5, 0.08f, &a);
+  AddValueNoise(g, d.seed ^ 0x702, 0.05, 0.05, 0.06f, &a);
+  AddWhiteNoise(g, d.seed ^ 0x703, d.texel_m, 0.04f, &a);
+  const Vec3f base(d.base_bgr), glass(45, 40, 38);
+  for (int j = 0; j < g.height; ++j) {
+    const double v = g.v0_m + j * g.step_m;
+    const float band =
+        d.style == 1 ? static_cast<float>(IntervalCoverage(v, 0.05, 0.5, g.step_m)) : 0.0f;
+    Vec3f* row = img->ptr<Vec3f>(j);
+    for (int i = 0; i < g.width; ++i) {
+      row[i] = Mix(base, glass, band) * (1.0f + a(j, i)) * d.gain;
+    }
+  }
+}
+
 void CheckerTexture(const TextureDesc& d, const SampleGrid& g, cv::Mat3f* img) {
   const Vec3f dark(d.checker_dark), light(d.checker_light);
   for (int j = 0; j < g.height; ++j) {
@@ -742,6 +824,17 @@ cv::Mat GenerateTexture(const Scene& scene, int texture, const SampleGrid& grid)
     case TextureKind::kChecker:
       CheckerTexture(d, grid, &img);
       break;
+    case TextureKind::kMetal:
+      MetalTexture(d, grid, &img);
+      break;
+    case TextureKind::kPaint:
+      PaintTexture(d, grid, &img);
+      break;
+  }
+  const Lighting& light = scene.lighting;
+  if (light.exposure != 1.0f || light.tint != cv::Vec3f(1.0f, 1.0f, 1.0f)) {
+    const cv::Vec3f k = light.tint * light.exposure;
+    img = img.mul(cv::Mat3f(img.size(), k));
   }
   cv::Mat out;
   img.convertTo(out, CV_8UC3);  // rounds and saturates

@@ -1,0 +1,61 @@
+// One drive of the trajectory yardstick end to end: simulate it (or reuse the
+// simulation on disk), read its motion vectors once, run the pipeline up to
+// scale and once per metric scale source (core/pipeline/pipeline.h
+// ScaleOptions), score everything against the ground truth.
+//
+// Scale error of a source: the Sim(3) alignment's scale of that run's
+// trajectory to the truth, minus 1 (0: metres are metres). Each source gets
+// the truth it asks for: camera height = the true height; speed = the true
+// speed at the up-to-scale run's first posed frame; first step = the true
+// distance between its first two posed frames. A source that never made the
+// run metric (e.g. no road tracked for the camera height) is "not metric".
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "core/common/status.h"
+#include "core/pipeline/pipeline.h"
+#include "lab/eval/drive_table.h"
+
+namespace slapse {
+
+struct DriveEvalOptions {
+  std::string out_dir = "out/trajectory_eval";  // drives land in out_dir/<profile>/<name>/
+  std::string profile = "mpeg2-ibbbp";          // EncoderProfile
+  bool reuse = true;                            // keep a drive already simulated
+  PipelineOptions pipeline;                     // the scale source is set per run
+  Status Check() const;
+};
+
+enum ScaleSourceIndex { kScaleCameraHeight = 0, kScaleSpeed = 1, kScaleFirstStep = 2 };
+constexpr int kNumScaleSources = 3;
+
+struct DriveResult {
+  DriveSpec spec;
+  int frames = 0;
+  int posed_frames = 0;           // frames with a pose (up to scale run)
+  int64_t first_pose_frame = -1;  // -1: never
+  double first_pose_s = -1.0;
+  int anchor_pairs = 0, tracked_pairs = 0;
+  double drive_distance_m = 0.0;  // the true path, whole drive
+  bool evaluated = false;         // >= 3 poses: the errors below are valid
+  double distance_m = 0.0;        // the true path over the posed frames
+  double ate_m = 0.0, eps_D = 0.0, rpe_m = 0.0, rpe_deg = 0.0;
+  int planes_evaluated = 0;
+  double eps_d_m = -1.0, eps_n_deg = -1.0;  // -1: no plane evaluated
+  bool metric[kNumScaleSources] = {false, false, false};
+  double scale_error[kNumScaleSources] = {0, 0, 0};  // valid where metric[] and evaluated
+  std::string note;                           // the most frequent reason a pair did not track
+  double simulate_s = 0.0, evaluate_s = 0.0;  // wall time
+};
+
+StatusOr<DriveResult> EvaluateDrive(const DriveSpec& spec, const DriveEvalOptions& options);
+
+// CSV (header + one row a drive) and the markdown report (per split: a table
+// and its medians / worst).
+std::string DriveResultsCsv(const std::vector<DriveResult>& results);
+std::string DriveResultsMarkdown(const std::vector<DriveResult>& results,
+                                 const std::string& profile);
+
+}  // namespace slapse
