@@ -20,6 +20,9 @@ PACKAGES=(
   libcli11-dev nlohmann-json3-dev
   # service
   libgrpc++-dev libprotobuf-dev protobuf-compiler protobuf-compiler-grpc
+  # service auth (server/auth.cc): OpenSSL's SHA-256 and constant-time compare for
+  # bearer tokens; the openssl CLI makes the tests' CA and certificates
+  libssl-dev openssl
   # tests
   libgtest-dev libgmock-dev
   # tests: the real RTSP server the RTSP pull tests pull from (tests/rtsp_server.py):

@@ -7,8 +7,11 @@
 
 namespace slapse::server {
 
-SlapseServer::SlapseServer(const ServerOptions& options)
-    : options_(options), manager_(options.sessions), service_(&manager_) {}
+SlapseServer::SlapseServer(const ServerOptions& options, std::unique_ptr<Authenticator> auth)
+    : options_(options),
+      auth_(std::move(auth)),
+      manager_(options.sessions),
+      service_(&manager_, auth_.get()) {}
 
 StatusOr<std::unique_ptr<SlapseServer>> SlapseServer::Start(const ServerOptions& options) {
   if (options.port < 0 || options.port > 65535) {
@@ -17,12 +20,17 @@ StatusOr<std::unique_ptr<SlapseServer>> SlapseServer::Start(const ServerOptions&
   if (options.sessions.max_sessions < 1) {
     return InvalidArgumentError("max_sessions must be >= 1");
   }
+  SLAPSE_RETURN_IF_ERROR(CheckListenAddress(options.address, options.auth));
+  auto credentials = MakeServerCredentials(options.auth);
+  if (!credentials.ok()) return credentials.status();
+  auto auth = Authenticator::Create(options.auth);
+  if (!auth.ok()) return auth.status();
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
-  std::unique_ptr<SlapseServer> server(new SlapseServer(options));
+  std::unique_ptr<SlapseServer> server(new SlapseServer(options, std::move(*auth)));
   grpc::ServerBuilder builder;
   const std::string address = options.address + ":" + std::to_string(options.port);
-  builder.AddListeningPort(address, grpc::InsecureServerCredentials(), &server->port_);
+  builder.AddListeningPort(address, *credentials, &server->port_);
   builder.RegisterService(&server->service_);
   builder.SetMaxReceiveMessageSize(16 << 20);
   server->server_ = builder.BuildAndStart();
