@@ -58,8 +58,8 @@ bool MakeCert(const std::string& dir, const std::string& name, const std::string
   const std::string key = dir + "/" + name + ".key", pem = dir + "/" + name + ".pem";
   const std::string newkey = "-newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes -keyout ";
   if (ca.empty()) {
-    return Openssl("req -x509 " + newkey + key + " -out " + pem + " -days 2 -subj /CN=" + cn +
-                   " -addext basicConstraints=critical,CA:TRUE -addext keyUsage=keyCertSign");
+    // The config's v3_ca extensions make it a CA (basicConstraints CA:TRUE).
+    return Openssl("req -x509 " + newkey + key + " -out " + pem + " -days 2 -subj /CN=" + cn);
   }
   const std::string ext_file = dir + "/" + name + ".ext";
   testing::WriteFileBytes(ext_file, ext + "\n");
