@@ -1,5 +1,7 @@
 #include "api/validate.h"
 
+#include <arpa/inet.h>
+
 #include <algorithm>
 #include <cctype>
 #include <cmath>
@@ -80,14 +82,165 @@ Status ValidateRtspPushPath(const std::string& path) {
   return Status::Ok();
 }
 
+bool IsSecretParamName(const std::string& name) {
+  std::string n;
+  for (char c : name) n += static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  static const char* const kExact[] = {"token",
+                                       "access_token",
+                                       "id_token",
+                                       "refresh_token",
+                                       "key",
+                                       "api_key",
+                                       "apikey",
+                                       "api-key",
+                                       "password",
+                                       "passwd",
+                                       "pwd",
+                                       "pass",
+                                       "secret",
+                                       "sig",
+                                       "signature",
+                                       "auth",
+                                       "authorization",
+                                       "credential",
+                                       "credentials",
+                                       "x-amz-signature",
+                                       "x-amz-credential",
+                                       "client_secret"};
+  for (const char* e : kExact) {
+    if (n == e) return true;
+  }
+  for (const std::string suffix : {"token", "secret", "password", "signature"}) {
+    if (n.size() > suffix.size() &&
+        n.compare(n.size() - suffix.size(), suffix.size(), suffix) == 0) {
+      return true;
+    }
+  }
+  return false;
+}
+
+namespace {
+
+// `params` ("a=1&token=x", the text after '?' or '#') with the values of
+// secret parameters replaced by ***.
+std::string RedactParams(const std::string& params) {
+  std::string out;
+  size_t start = 0;
+  while (start <= params.size()) {
+    size_t end = params.find_first_of("&;", start);
+    if (end == std::string::npos) end = params.size();
+    const std::string part = params.substr(start, end - start);
+    const size_t eq = part.find('=');
+    if (eq != std::string::npos && IsSecretParamName(part.substr(0, eq))) {
+      out += part.substr(0, eq + 1) + "***";
+    } else {
+      out += part;
+    }
+    if (end == params.size()) break;
+    out += params[end];
+    start = end + 1;
+  }
+  return out;
+}
+
+}  // namespace
+
+namespace {
+
+// One pass of RedactUrl: userinfo after every "://", then the parameters.
+std::string RedactUrlOnce(const std::string& url) {
+  std::string out = url;
+  for (size_t scheme_end = out.find("://"); scheme_end != std::string::npos;
+       scheme_end = out.find("://", scheme_end + 3)) {
+    const size_t auth = scheme_end + 3;
+    const size_t auth_end = std::min(out.find_first_of("/?#", auth), out.size());
+    const size_t at = out.rfind('@', auth_end == 0 ? 0 : auth_end - 1);
+    if (at != std::string::npos && at >= auth) out = out.substr(0, auth) + "***" + out.substr(at);
+  }
+  // The query and the fragment: name=value pairs.
+  const size_t q = out.find_first_of("?#");
+  if (q == std::string::npos) return out;
+  std::string tail(1, out[q]);
+  for (size_t start = q + 1;;) {
+    const size_t hash = out.find('#', start);
+    const size_t end = hash == std::string::npos ? out.size() : hash;
+    tail += RedactParams(out.substr(start, end - start));
+    if (end == out.size()) break;
+    tail += '#';
+    start = end + 1;
+  }
+  return out.substr(0, q) + tail;
+}
+
+}  // namespace
+
 std::string RedactUrl(const std::string& url) {
-  const size_t scheme_end = url.find("://");
-  if (scheme_end == std::string::npos) return url;
-  const size_t auth = scheme_end + 3;
-  const size_t auth_end = std::min(url.find_first_of("/?#", auth), url.size());
-  const size_t at = url.rfind('@', auth_end == 0 ? 0 : auth_end - 1);
-  if (at == std::string::npos || at < auth) return url;
-  return url.substr(0, auth) + "***" + url.substr(at);
+  // To a fixed point: masking a parameter can remove a "://" whose userinfo
+  // the pass had masked, so a later pass might see the text differently.
+  std::string out = RedactUrlOnce(url);
+  for (int pass = 0; pass < 8; ++pass) {
+    std::string next = RedactUrlOnce(out);
+    if (next == out) break;
+    out = std::move(next);
+  }
+  return out;
+}
+
+std::string RedactText(const std::string& text) {
+  auto stop = [](char c) {
+    return std::isspace(static_cast<unsigned char>(c)) || c == '\'' || c == '"' || c == '<' ||
+           c == '>' || c == '`' || c == ')' || c == ']';
+  };
+  std::string out;
+  size_t i = 0;
+  while (i < text.size()) {
+    const size_t sep = text.find("://", i);
+    if (sep == std::string::npos) {
+      out += text.substr(i);
+      break;
+    }
+    // The scheme: the letters (and + - .) before "://".
+    size_t begin = sep;
+    while (begin > i &&
+           (std::isalnum(static_cast<unsigned char>(text[begin - 1])) || text[begin - 1] == '+' ||
+            text[begin - 1] == '-' || text[begin - 1] == '.')) {
+      --begin;
+    }
+    size_t end = sep + 3;
+    while (end < text.size() && !stop(text[end])) ++end;
+    out += text.substr(i, begin - i) + RedactUrl(text.substr(begin, end - begin));
+    i = end;
+  }
+  // "Bearer <token>" (any case) -> "Bearer ***".
+  std::string lower = out;
+  for (char& c : lower) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  std::string masked;
+  size_t from = 0;
+  for (size_t at = lower.find("bearer "); at != std::string::npos;
+       at = lower.find("bearer ", at + 7)) {
+    size_t v = at + 7, e = v;
+    while (e < out.size() && !stop(out[e])) ++e;
+    if (e == v || out.compare(v, e - v, "***") == 0) continue;
+    masked += out.substr(from, v - from) + "***";
+    from = e;
+  }
+  return masked + out.substr(from);
+}
+
+void RedactSession(v1::Session* s) {
+  if (s->has_rtsp_pull()) s->mutable_rtsp_pull()->set_url(RedactUrl(s->rtsp_pull().url()));
+  if (!s->ingest_url().empty()) s->set_ingest_url(RedactUrl(s->ingest_url()));
+  if (s->has_error()) s->mutable_error()->set_message(RedactText(s->error().message()));
+  s->set_state_message(RedactText(s->state_message()));
+}
+
+void RedactEvent(v1::SessionEvent* e) {
+  if (e->has_state_change()) {
+    e->mutable_state_change()->set_message(RedactText(e->state_change().message()));
+  }
+  if (e->has_reconnecting()) {
+    e->mutable_reconnecting()->set_reason(RedactText(e->reconnecting().reason()));
+  }
 }
 
 Status ValidateRtspUrl(const std::string& url) {
@@ -175,6 +328,23 @@ Status ValidateReconnectPolicy(const v1::ReconnectPolicy& p) {
 // A light syntax check (RFC 4566): "v=0" first, every line "<letter>=...",
 // a c= line and an m=video line with a port. FFmpeg's SDP parser accepts
 // almost anything, so this is what turns a malformed SDP into INVALID_ARGUMENT.
+Status ValidateAllowedSenders(const v1::RtpSdp& rtp) {
+  if (rtp.allowed_senders_size() > kMaxAllowedSenders) {
+    return InvalidArgumentError("rtp_sdp.allowed_senders has " +
+                                std::to_string(rtp.allowed_senders_size()) + " entries; at most " +
+                                std::to_string(kMaxAllowedSenders));
+  }
+  for (int i = 0; i < rtp.allowed_senders_size(); ++i) {
+    const std::string& a = rtp.allowed_senders(i);
+    in6_addr buf{};
+    if (inet_pton(AF_INET, a.c_str(), &buf) != 1 && inet_pton(AF_INET6, a.c_str(), &buf) != 1) {
+      return InvalidArgumentError("rtp_sdp.allowed_senders[" + std::to_string(i) + "] '" + a +
+                                  "' is not an IPv4 or IPv6 address (names are not resolved)");
+    }
+  }
+  return Status::Ok();
+}
+
 Status ValidateSdp(const std::string& sdp) {
   auto bad = [](const std::string& why) { return InvalidArgumentError("rtp_sdp.sdp: " + why); };
   if (sdp.empty()) return bad("required (the session description text)");
@@ -223,6 +393,7 @@ Status ValidateSession(const v1::Session& r) {
       break;
     case v1::Session::kRtpSdp:
       SLAPSE_RETURN_IF_ERROR(ValidateSdp(r.rtp_sdp().sdp()));
+      SLAPSE_RETURN_IF_ERROR(ValidateAllowedSenders(r.rtp_sdp()));
       SLAPSE_RETURN_IF_ERROR(ValidateSourceTimeouts(r.rtp_sdp().start_timeout_ms(),
                                                     r.rtp_sdp().receive_timeout_ms(), "rtp_sdp"));
       break;

@@ -45,6 +45,9 @@ Status ValidateRtspPushPath(const std::string& path);
 // A light syntax check (RFC 4566): "v=0" first, every line "<letter>=...",
 // a c= line and an m=video line with a port.
 Status ValidateSdp(const std::string& sdp);
+// RtpSdp.allowed_senders: at most kMaxAllowedSenders IPv4 / IPv6 literals.
+constexpr int kMaxAllowedSenders = 64;
+Status ValidateAllowedSenders(const v1::RtpSdp& rtp);
 Status ValidatePipelineOptions(const v1::PipelineOptions& options);
 // ListSessionsRequest: page_size >= 0 and state_filter one of Session.State.
 Status ValidateListRequest(const v1::ListSessionsRequest& request);
@@ -61,7 +64,25 @@ constexpr double kMaxFovDeg = 170.0;
 Status ValidateIntrinsicsForImage(const v1::Intrinsics& k, int width_px, int height_px,
                                   const std::string& what);
 
-// The URL with any user:password@ replaced by ***@, for messages.
+// The one home of secret masking (responses, events, errors, logs).
+//
+// RedactUrl: the URL with any user:password@ replaced by ***@ and the value
+// of every token-like query or fragment parameter (IsSecretParamName)
+// replaced by ***:  rtsp://u:pw@cam/1?token=abc&ch=2 -> rtsp://***@cam/1?token=***&ch=2.
+// Idempotent; a URL without '@' and without a secret parameter is unchanged.
 std::string RedactUrl(const std::string& url);
+// Whether a query parameter named `name` (any case) holds a secret: token,
+// access_token, key, api_key, apikey, password, passwd, pwd, pass, secret,
+// sig, signature, auth, authorization, credential(s), x-amz-signature, ...
+// (also any name that ends in "token", "secret", "password" or "signature").
+bool IsSecretParamName(const std::string& name);
+// Free text (an error or log message): every URL in it (scheme://... up to a
+// space or quote) through RedactUrl, and "Bearer <token>" -> "Bearer ***".
+std::string RedactText(const std::string& text);
+// A response or event as it may leave the server: URLs and messages masked
+// (rtsp_pull.url, ingest_url, error, state_message; StateChange.message,
+// Reconnecting.reason).
+void RedactSession(v1::Session* session);
+void RedactEvent(v1::SessionEvent* event);
 
 }  // namespace slapse::api

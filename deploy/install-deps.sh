@@ -22,6 +22,9 @@ PACKAGES=(
   libgrpc++-dev libprotobuf-dev protobuf-compiler protobuf-compiler-grpc
   # service persistence: sessions, events, trajectories, plane maps (server/store.cc)
   libsqlite3-dev
+  # service auth (server/auth.cc): OpenSSL's SHA-256 and constant-time compare for
+  # bearer tokens; the openssl CLI makes the tests' CA and certificates
+  libssl-dev openssl
   # tests
   libgtest-dev libgmock-dev
   # tests: the real RTSP server the RTSP pull tests pull from (tests/rtsp_server.py):

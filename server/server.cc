@@ -7,8 +7,11 @@
 
 namespace slapse::server {
 
-SlapseServer::SlapseServer(const ServerOptions& options)
-    : options_(options), manager_(options.sessions), service_(&manager_) {}
+SlapseServer::SlapseServer(const ServerOptions& options, std::unique_ptr<Authenticator> auth)
+    : options_(options),
+      auth_(std::move(auth)),
+      manager_(options.sessions),
+      service_(&manager_, auth_.get()) {}
 
 StatusOr<std::unique_ptr<SlapseServer>> SlapseServer::Start(const ServerOptions& options) {
   if (options.port < 0 || options.port > 65535) {
@@ -20,14 +23,19 @@ StatusOr<std::unique_ptr<SlapseServer>> SlapseServer::Start(const ServerOptions&
   if (options.sessions.retention_ttl_s < 0) {
     return InvalidArgumentError("retention_ttl_s must be >= 0 (0: keep results)");
   }
+  SLAPSE_RETURN_IF_ERROR(CheckListenAddress(options.address, options.auth));
+  auto credentials = MakeServerCredentials(options.auth);
+  if (!credentials.ok()) return credentials.status();
+  auto auth = Authenticator::Create(options.auth);
+  if (!auth.ok()) return auth.status();
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
-  std::unique_ptr<SlapseServer> server(new SlapseServer(options));
+  std::unique_ptr<SlapseServer> server(new SlapseServer(options, std::move(*auth)));
   // Restores the stored sessions before anyone can call.
   SLAPSE_RETURN_IF_ERROR(server->manager_.Open());
   grpc::ServerBuilder builder;
   const std::string address = options.address + ":" + std::to_string(options.port);
-  builder.AddListeningPort(address, grpc::InsecureServerCredentials(), &server->port_);
+  builder.AddListeningPort(address, *credentials, &server->port_);
   builder.RegisterService(&server->service_);
   builder.SetMaxReceiveMessageSize(16 << 20);
   server->server_ = builder.BuildAndStart();

@@ -18,24 +18,31 @@
 #include <grpcpp/server.h>
 
 #include "core/common/status.h"
+#include "server/auth.h"
 #include "server/service.h"
 #include "server/session_manager.h"
 
 namespace slapse::server {
 
 struct ServerOptions {
-  // Address to listen on; "0.0.0.0" for every interface.
+  // Address to listen on; "0.0.0.0" for every interface. A non-loopback
+  // address needs TLS and tokens in `auth`, or auth.allow_insecure
+  // (CheckListenAddress): else Start fails with FAILED_PRECONDITION.
   std::string address = "127.0.0.1";
   // TCP port; 0 picks a free one (see SlapseServer::port()).
   int port = 50051;
   SessionManagerOptions sessions;
   // How long Shutdown() lets running rpcs finish before cancelling them.
   double shutdown_grace_s = 2.0;
+  // TLS, bearer tokens and the insecure-bind override (server/auth.h).
+  AuthOptions auth;
 };
 
 class SlapseServer {
  public:
-  // Binds and starts serving. UNAVAILABLE if the address cannot be bound.
+  // Binds and starts serving. UNAVAILABLE if the address cannot be bound;
+  // INVALID_ARGUMENT for unreadable TLS files or a bad tokens file;
+  // FAILED_PRECONDITION for an unprotected non-loopback address.
   static StatusOr<std::unique_ptr<SlapseServer>> Start(const ServerOptions& options);
   // Shuts down if still running.
   ~SlapseServer();
@@ -49,11 +56,14 @@ class SlapseServer {
   void Shutdown();
   // Blocks until Shutdown() has completed.
   void Wait();
+  // Re-reads the tokens file now (SIGHUP); on error the old tokens stay.
+  Status ReloadTokens() { return auth_->Reload(); }
 
  private:
-  explicit SlapseServer(const ServerOptions& options);
+  SlapseServer(const ServerOptions& options, std::unique_ptr<Authenticator> auth);
 
   ServerOptions options_;
+  std::unique_ptr<Authenticator> auth_;
   SessionManager manager_;
   SlapseServiceImpl service_;
   std::unique_ptr<grpc::Server> server_;

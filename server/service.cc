@@ -1,15 +1,30 @@
 #include "server/service.h"
 
+#include "api/validate.h"
 #include "server/grpc_status.h"
 
 namespace slapse::server {
 namespace {
 
-// Copies a StatusOr's value into `response` or returns its error.
+// An error as it may leave the server: its message masked.
+grpc::Status Error(const Status& s) {
+  return ToGrpcStatus(Status(s.code(), api::RedactText(s.message())));
+}
+
+// What a response may show: secrets masked.
+void Redact(v1::Session* s) { api::RedactSession(s); }
+void Redact(v1::ListSessionsResponse* r) {
+  for (v1::Session& s : *r->mutable_sessions()) api::RedactSession(&s);
+}
+void Redact(v1::Trajectory*) {}
+void Redact(v1::PlaneMap*) {}
+
+// Copies a StatusOr's value into `response` (masked) or returns its error.
 template <typename T>
 grpc::Status Reply(StatusOr<T> result, T* response) {
-  if (!result.ok()) return ToGrpcStatus(result.status());
+  if (!result.ok()) return Error(result.status());
   *response = std::move(*result);
+  Redact(response);
   return grpc::Status::OK;
 }
 
@@ -19,39 +34,76 @@ constexpr auto kWatchPoll = std::chrono::milliseconds(100);
 
 }  // namespace
 
-grpc::Status SlapseServiceImpl::CreateSession(grpc::ServerContext*,
-                                              const v1::CreateSessionRequest* request,
-                                              v1::Session* response) {
-  return Reply(manager_->Create(request->session()), response);
+StatusOr<Caller> SlapseServiceImpl::Authorize(const grpc::ServerContext& context,
+                                              const std::string& rpc, bool read) const {
+  if (auth_ == nullptr) return Caller{};
+  auto caller = auth_->Authenticate(context);
+  if (!caller.ok()) return caller.status();
+  if (!read) SLAPSE_RETURN_IF_ERROR(Authenticator::CheckMayWrite(*caller, rpc));
+  return caller;
 }
 
-grpc::Status SlapseServiceImpl::GetSession(grpc::ServerContext*,
+Status SlapseServiceImpl::CheckOwner(const std::string& name, const Caller& caller) const {
+  if (auth_ == nullptr || !auth_->enabled()) return Status::Ok();
+  auto s = manager_->Get(name);
+  if (!s.ok()) return s.status();
+  if (s->tenant() != caller.tenant) return SessionNotFoundError(name);
+  return Status::Ok();
+}
+
+// The caller of the rpc or its error, then the ownership of `name`.
+#define SLAPSE_AUTHORIZE(caller, rpc, read)     \
+  auto caller = Authorize(*context, rpc, read); \
+  if (!caller.ok()) return Error(caller.status())
+#define SLAPSE_CHECK_OWNER(name, caller) \
+  if (Status owner = CheckOwner(name, *caller); !owner.ok()) return Error(owner)
+
+grpc::Status SlapseServiceImpl::CreateSession(grpc::ServerContext* context,
+                                              const v1::CreateSessionRequest* request,
+                                              v1::Session* response) {
+  SLAPSE_AUTHORIZE(caller, "CreateSession", false);
+  v1::Session session = request->session();
+  session.set_tenant(caller->tenant);  // output only: the caller's, whatever was sent
+  return Reply(manager_->Create(session), response);
+}
+
+grpc::Status SlapseServiceImpl::GetSession(grpc::ServerContext* context,
                                            const v1::GetSessionRequest* request,
                                            v1::Session* response) {
+  SLAPSE_AUTHORIZE(caller, "GetSession", true);
+  SLAPSE_CHECK_OWNER(request->name(), caller);
   return Reply(manager_->Get(request->name()), response);
 }
 
-grpc::Status SlapseServiceImpl::ListSessions(grpc::ServerContext*,
+grpc::Status SlapseServiceImpl::ListSessions(grpc::ServerContext* context,
                                              const v1::ListSessionsRequest* request,
                                              v1::ListSessionsResponse* response) {
-  return Reply(manager_->List(*request), response);
+  SLAPSE_AUTHORIZE(caller, "ListSessions", true);
+  const bool filter = auth_ != nullptr && auth_->enabled();
+  return Reply(manager_->List(*request, filter ? &caller->tenant : nullptr), response);
 }
 
-grpc::Status SlapseServiceImpl::DeleteSession(grpc::ServerContext*,
+grpc::Status SlapseServiceImpl::DeleteSession(grpc::ServerContext* context,
                                               const v1::DeleteSessionRequest* request,
                                               v1::DeleteSessionResponse*) {
-  return ToGrpcStatus(manager_->Delete(request->name()));
+  SLAPSE_AUTHORIZE(caller, "DeleteSession", false);
+  SLAPSE_CHECK_OWNER(request->name(), caller);
+  const Status s = manager_->Delete(request->name());
+  return s.ok() ? grpc::Status::OK : Error(s);
 }
 
-grpc::Status SlapseServiceImpl::StopSession(grpc::ServerContext*,
+grpc::Status SlapseServiceImpl::StopSession(grpc::ServerContext* context,
                                             const v1::StopSessionRequest* request,
                                             v1::Session* response) {
+  SLAPSE_AUTHORIZE(caller, "StopSession", false);
+  SLAPSE_CHECK_OWNER(request->name(), caller);
   return Reply(manager_->Stop(request->name()), response);
 }
 
 grpc::Status SlapseServiceImpl::UploadStream(grpc::ServerContext* context,
                                              grpc::ServerReader<v1::UploadChunk>* reader,
                                              v1::Session* response) {
+  SLAPSE_AUTHORIZE(caller, "UploadStream", false);
   v1::UploadChunk first;
   if (!reader->Read(&first)) {
     return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
@@ -61,6 +113,7 @@ grpc::Status SlapseServiceImpl::UploadStream(grpc::ServerContext* context,
     return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
                         "the first upload message must name the session (sessions/{id})");
   }
+  SLAPSE_CHECK_OWNER(first.name(), caller);
   auto next = [reader](std::string* bytes) {
     v1::UploadChunk chunk;
     if (!reader->Read(&chunk)) return false;
@@ -75,8 +128,10 @@ grpc::Status SlapseServiceImpl::UploadStream(grpc::ServerContext* context,
 grpc::Status SlapseServiceImpl::WatchSession(grpc::ServerContext* context,
                                              const v1::WatchSessionRequest* request,
                                              grpc::ServerWriter<v1::SessionEvent>* writer) {
+  SLAPSE_AUTHORIZE(caller, "WatchSession", true);
+  SLAPSE_CHECK_OWNER(request->name(), caller);
   auto log = manager_->Events(request->name());
-  if (!log.ok()) return ToGrpcStatus(log.status());
+  if (!log.ok()) return Error(log.status());
   uint64_t cursor = request->after_sequence();
   std::vector<v1::SessionEvent> events;
   for (;;) {
@@ -87,8 +142,9 @@ grpc::Status SlapseServiceImpl::WatchSession(grpc::ServerContext* context,
     bool ended = false;
     Status s = (*log)->Read(cursor, kWatchBatch, std::chrono::steady_clock::now() + kWatchPoll,
                             &events, &ended);
-    if (!s.ok()) return ToGrpcStatus(s);
-    for (const v1::SessionEvent& e : events) {
+    if (!s.ok()) return Error(s);
+    for (v1::SessionEvent& e : events) {
+      api::RedactEvent(&e);
       // A blocked Write holds only this watcher: the pipeline appends to the
       // ring and never waits for watchers.
       if (!writer->Write(e)) return grpc::Status(grpc::StatusCode::CANCELLED, "client went away");
@@ -109,15 +165,19 @@ grpc::Status SlapseServiceImpl::WatchSession(grpc::ServerContext* context,
   }
 }
 
-grpc::Status SlapseServiceImpl::GetTrajectory(grpc::ServerContext*,
+grpc::Status SlapseServiceImpl::GetTrajectory(grpc::ServerContext* context,
                                               const v1::GetTrajectoryRequest* request,
                                               v1::Trajectory* response) {
+  SLAPSE_AUTHORIZE(caller, "GetTrajectory", true);
+  SLAPSE_CHECK_OWNER(request->name(), caller);
   return Reply(manager_->GetTrajectory(*request), response);
 }
 
-grpc::Status SlapseServiceImpl::GetPlaneMap(grpc::ServerContext*,
+grpc::Status SlapseServiceImpl::GetPlaneMap(grpc::ServerContext* context,
                                             const v1::GetPlaneMapRequest* request,
                                             v1::PlaneMap* response) {
+  SLAPSE_AUTHORIZE(caller, "GetPlaneMap", true);
+  SLAPSE_CHECK_OWNER(request->name(), caller);
   return Reply(manager_->GetPlaneMap(*request), response);
 }
 

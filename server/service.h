@@ -1,5 +1,12 @@
 // The gRPC face of SessionManager: slapse.v1.SlapseService over the sync API.
 //
+// Every rpc first asks the Authenticator (server/auth.h) who calls
+// (UNAUTHENTICATED otherwise) and whether it may change things
+// (PERMISSION_DENIED for a read-only token); a session of another tenant is
+// NOT_FOUND, word for word as an unknown one, and ListSessions leaves it out.
+// Everything that leaves (sessions, events, error messages) goes through
+// api::RedactSession / RedactEvent / RedactText first.
+//
 // Thread-safety: gRPC calls the handlers concurrently; all state lives in the
 // (thread-safe) SessionManager.
 #pragma once
@@ -7,6 +14,7 @@
 #include <atomic>
 #include <chrono>
 
+#include "server/auth.h"
 #include "server/session_manager.h"
 #include "slapse/v1/slapse.grpc.pb.h"
 
@@ -14,8 +22,10 @@ namespace slapse::server {
 
 class SlapseServiceImpl final : public v1::SlapseService::Service {
  public:
-  // `manager` must outlive the service.
-  explicit SlapseServiceImpl(SessionManager* manager) : manager_(manager) {}
+  // `manager` and `auth` must outlive the service; a null `auth` lets every
+  // caller in as the single tenant "".
+  explicit SlapseServiceImpl(SessionManager* manager, Authenticator* auth = nullptr)
+      : manager_(manager), auth_(auth) {}
 
   // Makes blocked UploadStream calls fail soon (CANCELLED).
   void BeginShutdown() { shutting_down_ = true; }
@@ -41,7 +51,15 @@ class SlapseServiceImpl final : public v1::SlapseService::Service {
                            v1::PlaneMap* response) override;
 
  private:
+  // The caller of `context`, which may `rpc` (a write unless `read`).
+  StatusOr<Caller> Authorize(const grpc::ServerContext& context, const std::string& rpc,
+                             bool read) const;
+  // NOT_FOUND (as SessionManager says for an unknown name) unless `caller`
+  // owns session `name`; a malformed or unknown name gives the manager's error.
+  Status CheckOwner(const std::string& name, const Caller& caller) const;
+
   SessionManager* manager_;
+  Authenticator* auth_;
   std::atomic<bool> shutting_down_{false};
 };
 

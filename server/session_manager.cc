@@ -20,6 +20,10 @@ namespace slapse::server {
 
 using google::protobuf::util::TimeUtil;
 
+Status SessionNotFoundError(const std::string& name) {
+  return NotFoundError("no session '" + name + "' on this server");
+}
+
 SessionManager::SessionManager(SessionManagerOptions options)
     : options_(options), pool_(options_.max_sessions) {}
 
@@ -198,7 +202,7 @@ StatusOr<std::shared_ptr<Session>> SessionManager::Find(const std::string& name)
   if (!ok) return InvalidArgumentError("'" + name + "' is not a session name (sessions/{id})");
   std::lock_guard<std::mutex> lock(mu_);
   auto it = ordinals_.find(name);
-  if (it == ordinals_.end()) return NotFoundError("no session '" + name + "' on this server");
+  if (it == ordinals_.end()) return SessionNotFoundError(name);
   return sessions_.at(it->second);
 }
 
@@ -208,8 +212,8 @@ StatusOr<v1::Session> SessionManager::Get(const std::string& name) const {
   return (*s)->Snapshot();
 }
 
-StatusOr<v1::ListSessionsResponse> SessionManager::List(
-    const v1::ListSessionsRequest& request) const {
+StatusOr<v1::ListSessionsResponse> SessionManager::List(const v1::ListSessionsRequest& request,
+                                                        const std::string* tenant) const {
   SLAPSE_RETURN_IF_ERROR(api::ValidateListRequest(request));
   const size_t page_size =
       request.page_size() == 0 ? 50 : std::min<size_t>(request.page_size(), 1000);
@@ -234,6 +238,7 @@ StatusOr<v1::ListSessionsResponse> SessionManager::List(
         snap.state() != request.state_filter()) {
       continue;
     }
+    if (tenant != nullptr && snap.tenant() != *tenant) continue;
     if (static_cast<size_t>(out.sessions_size()) == page_size) {
       // More follow: the token is the ordinal of the last session returned.
       out.set_next_page_token(std::to_string(last_ordinal));

@@ -63,6 +63,10 @@ struct SessionManagerOptions {
   int64_t retention_ttl_s = 0;
 };
 
+// NOT_FOUND for session `name`: "no session '<name>' on this server" (also
+// what another tenant's session is, so the two read the same).
+Status SessionNotFoundError(const std::string& name);
+
 class SessionManager {
  public:
   explicit SessionManager(SessionManagerOptions options);
@@ -82,7 +86,9 @@ class SessionManager {
   StatusOr<v1::Session> Create(const v1::Session& request);
   StatusOr<v1::Session> Get(const std::string& name) const;
   // Sessions in creation order from `page_token`; see ListSessionsRequest.
-  StatusOr<v1::ListSessionsResponse> List(const v1::ListSessionsRequest& request) const;
+  // With `tenant`, only that tenant's sessions (Session.tenant); null = all.
+  StatusOr<v1::ListSessionsResponse> List(const v1::ListSessionsRequest& request,
+                                          const std::string* tenant = nullptr) const;
   Status Delete(const std::string& name);
   StatusOr<v1::Session> Stop(const std::string& name);
 

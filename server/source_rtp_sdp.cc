@@ -1,4 +1,5 @@
-// The RTP/SDP source: RTP packets (UDP) as the client's SDP describes them.
+// The RTP/SDP source: RTP packets (UDP) as the client's SDP describes them,
+// from the senders of RtpSdp.allowed_senders only (when given).
 // RTP has no end-of-stream, so a session that got video FINISHES when
 // none arrived for receive_timeout_ms; none within start_timeout_ms FAILS it.
 #include <netinet/in.h>
@@ -58,10 +59,28 @@ Status CheckRtpPortsFree(const std::string& sdp) {
 
 namespace {
 
+// `sdp` with the sender allow-list as RFC 4570 source-filter lines (one per
+// address family) before its first m= line, so they apply to every stream.
+// FFmpeg's SDP demuxer turns them into the RTP input's "sources" option,
+// which drops packets from any other address.
+std::string WithSourceFilter(const std::string& sdp,
+                             const google::protobuf::RepeatedPtrField<std::string>& allowed) {
+  if (allowed.empty()) return sdp;
+  std::string v4, v6;
+  for (const std::string& a : allowed) (a.find(':') == std::string::npos ? v4 : v6) += " " + a;
+  std::string lines;
+  if (!v4.empty()) lines += "a=source-filter: incl IN IP4 *" + v4 + "\r\n";
+  if (!v6.empty()) lines += "a=source-filter: incl IN IP6 *" + v6 + "\r\n";
+  size_t at = sdp.find("\nm=");
+  at = sdp.compare(0, 2, "m=") == 0 ? 0 : (at == std::string::npos ? sdp.size() : at + 1);
+  return sdp.substr(0, at) + lines + sdp.substr(at);
+}
+
 class RtpSdpSource : public SingleConnectionSource {
  public:
   explicit RtpSdpSource(const v1::RtpSdp& rtp)
-      : SingleConnectionSource(rtp.start_timeout_ms(), rtp.receive_timeout_ms()), sdp_(rtp.sdp()) {}
+      : SingleConnectionSource(rtp.start_timeout_ms(), rtp.receive_timeout_ms()),
+        sdp_(WithSourceFilter(rtp.sdp(), rtp.allowed_senders())) {}
 
   // The SDP goes to a private temp file (mkstemp: mode 0600) that is removed
   // once FFmpeg has parsed it; only file, udp and rtp are allowed.

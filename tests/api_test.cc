@@ -279,6 +279,39 @@ TEST(ValidateTest, RtspUrlAndRedaction) {
   EXPECT_EQ(api::RedactUrl("rtsp://cam/1"), "rtsp://cam/1");
 }
 
+TEST(ValidateTest, RedactionMasksQuerySecretsTextAndResponses) {
+  EXPECT_EQ(api::RedactUrl("rtsp://u:pw@cam/1?token=abc&ch=2"), "rtsp://***@cam/1?token=***&ch=2");
+  EXPECT_EQ(api::RedactUrl("rtsp://cam/1?ch=2&Access_Token=x;sig=y#key=z&a=b"),
+            "rtsp://cam/1?ch=2&Access_Token=***;sig=***#key=***&a=b");
+  EXPECT_EQ(api::RedactUrl("rtsp://cam/1?password=&auth=q&x-amz-signature=s&user=bob"),
+            "rtsp://cam/1?password=***&auth=***&x-amz-signature=***&user=bob");
+  EXPECT_EQ(api::RedactUrl("rtsp://cam/1?channel=2&keyframe=1"),
+            "rtsp://cam/1?channel=2&keyframe=1");
+  // A URL inside a parameter: its userinfo too; idempotent.
+  const std::string nested = "rtsp://cam/1?next=rtsp://u:pw@b/2&token=t";
+  EXPECT_EQ(api::RedactUrl(nested), "rtsp://cam/1?next=rtsp://***@b/2&token=***");
+  EXPECT_EQ(api::RedactUrl(api::RedactUrl(nested)), api::RedactUrl(nested));
+  EXPECT_TRUE(api::IsSecretParamName("refresh_token"));
+  EXPECT_TRUE(api::IsSecretParamName("PASSWORD"));
+  EXPECT_FALSE(api::IsSecretParamName("keyframe"));
+
+  EXPECT_EQ(api::RedactText("cannot open 'rtsp://a:b@cam/1?token=x': refused; Bearer abc.def here"),
+            "cannot open 'rtsp://***@cam/1?token=***': refused; Bearer *** here");
+  EXPECT_EQ(api::RedactText("no url here"), "no url here");
+
+  v1::Session s;
+  s.mutable_rtsp_pull()->set_url("rtsp://u:pw@cam/1?key=k");
+  s.mutable_error()->set_message("UNAVAILABLE at rtsp://u:pw@cam/1?key=k");
+  s.set_state_message("rtsp://u:pw@cam/1?key=k gone");
+  api::RedactSession(&s);
+  EXPECT_EQ(s.rtsp_pull().url(), "rtsp://***@cam/1?key=***");
+  EXPECT_EQ(s.DebugString().find("pw"), std::string::npos) << s.DebugString();
+  v1::SessionEvent e;
+  e.mutable_reconnecting()->set_reason("lost rtsp://u:pw@cam/1?key=k");
+  api::RedactEvent(&e);
+  EXPECT_EQ(e.reconnecting().reason(), "lost rtsp://***@cam/1?key=***");
+}
+
 TEST(ValidateTest, ReconnectPolicySdpAndPath) {
   v1::ReconnectPolicy p;
   EXPECT_TRUE(api::ValidateReconnectPolicy(p).ok());

@@ -169,6 +169,7 @@ class FaultCatalogueTest : public ::testing::Test {
   void AddStreamItems(std::vector<Item>* items);
   void AddUploadItems(std::vector<Item>* items);
   void AddStateItems(std::vector<Item>* items);
+  void AddSecurityItems(std::vector<Item>* items);
 
   std::string dir_, drive_path_, drive_, target_;
   Intrinsics k_;
@@ -386,6 +387,7 @@ std::vector<Item> FaultCatalogueTest::Catalogue() {
   AddStreamItems(&items);
   AddUploadItems(&items);
   AddStateItems(&items);
+  AddSecurityItems(&items);
   return items;
 }
 
@@ -562,6 +564,133 @@ void FaultCatalogueTest::AddStateItems(std::vector<Item>* out) {
                      }
                      for (const std::string& name : held) (void)client_->StopSession(name);
                      return FromStatus(s);
+                   }});
+}
+
+// Auth and secrets (server/auth.h): servers refused at start, and rpcs to a
+// second server with bearer tokens (tenants "acme" and "globex").
+void FaultCatalogueTest::AddSecurityItems(std::vector<Item>* out) {
+  std::vector<Item>& items = *out;
+  const auto I = v1::Session::STATE_UNSPECIFIED;
+  const auto FAILED = v1::Session::FAILED;
+  auto start = [](server::ServerOptions o) {
+    o.port = 0;
+    auto s = server::SlapseServer::Start(o);
+    return FromStatus(s.status());
+  };
+  items.push_back({"serve on 0.0.0.0 without TLS and tokens", I, StatusCode::kFailedPrecondition,
+                   "refusing to listen on 0.0.0.0 without TLS and bearer tokens", [start] {
+                     server::ServerOptions o;
+                     o.address = "0.0.0.0";
+                     return start(o);
+                   }});
+  items.push_back({"serve with --tls-key but no --tls-cert", I, StatusCode::kInvalidArgument,
+                   "TLS needs both a certificate and its key", [start] {
+                     server::ServerOptions o;
+                     o.auth.tls_key_file = "/nonexistent.key";
+                     return start(o);
+                   }});
+  const std::string tokens = dir_ + "/tokens.json";
+  items.push_back({"tokens file with a 5-character token", I, StatusCode::kInvalidArgument,
+                   "tokens[0]: 'token' must be a string of at least 16 characters",
+                   [start, tokens] {
+                     testing::WriteFileBytes(
+                         tokens, "{\"tokens\": [{\"token\": \"short\", \"tenant\": \"a\"}]}");
+                     server::ServerOptions o;
+                     o.auth.tokens_file = tokens;
+                     return start(o);
+                   }});
+  // The server with tokens, shared by the items below (started by the first).
+  auto secure = std::make_shared<std::unique_ptr<server::SlapseServer>>();
+  auto client_with = [this, secure, tokens](const std::string& token) {
+    if (*secure == nullptr) {
+      testing::WriteFileBytes(tokens,
+                              "{\"tokens\": [{\"token\": \"acme-token-0123456789\", \"tenant\": "
+                              "\"acme\"}, {\"token\": \"globex-token-0123456789\", \"tenant\": "
+                              "\"globex\"}, {\"token\": \"acme-reader-0123456789\", \"tenant\": "
+                              "\"acme\", \"role\": \"read_only\"}]}");
+      server::ServerOptions o;
+      o.port = 0;
+      o.auth.tokens_file = tokens;
+      o.shutdown_grace_s = 1;
+      auto s = server::SlapseServer::Start(o);
+      EXPECT_TRUE(s.ok()) << s.status().ToString();
+      if (s.ok()) *secure = std::move(*s);
+    }
+    client::ClientOptions c = testing::TestClientOptions();
+    c.token = token;
+    const int port = *secure ? (*secure)->port() : 1;
+    return SlapseClient::Connect("127.0.0.1:" + std::to_string(port), c);
+  };
+  items.push_back({"rpc without a bearer token (tokens server)", I, server::kUnauthenticated,
+                   "this server requires a bearer token", [client_with] {
+                     return FromStatus(client_with("")->GetSession("sessions/1").status());
+                   }});
+  items.push_back({"rpc with an unknown bearer token", I, server::kUnauthenticated,
+                   "the bearer token is not valid", [client_with] {
+                     return FromStatus(
+                         client_with("unknown-token-0123456789")->ListSessions(0, "", I).status());
+                   }});
+  items.push_back(
+      {"GetSession of another tenant's session", I, StatusCode::kNotFound, "no session 'sessions/",
+       [this, client_with] {
+         auto created = client_with("acme-token-0123456789")->CreateSession(Request());
+         if (!created.ok()) return FromStatus(created.status());
+         Outcome o = FromStatus(
+             client_with("globex-token-0123456789")->GetSession(created->name()).status());
+         (void)client_with("acme-token-0123456789")->StopSession(created->name());
+         return o;
+       }});
+  items.push_back({"CreateSession with a read-only token", I, StatusCode::kPermissionDenied,
+                   "has a read-only token: CreateSession is not allowed", [this, client_with] {
+                     return FromStatus(
+                         client_with("acme-reader-0123456789")->CreateSession(Request()).status());
+                   }});
+  // RTP sender allow-list: ffmpeg sends from 127.0.0.1.
+  auto rtp_from_ffmpeg = [this](const std::string& allowed) {
+    const int port = testing::FreeRtpPort();
+    v1::Session r = Request();
+    r.mutable_rtp_sdp()->set_sdp(testing::Mpeg2RtpSdp(port));
+    r.mutable_rtp_sdp()->add_allowed_senders(allowed);
+    r.mutable_rtp_sdp()->set_start_timeout_ms(3000);
+    r.mutable_rtp_sdp()->set_receive_timeout_ms(1000);
+    return CreateAndEnd(r, [&](const std::string&) {
+      if (!testing::WaitForLocalPort("udp", port, std::chrono::seconds(5))) return;
+      FfmpegProcess sender({"-re", "-i", drive_path_, "-c", "copy", "-f", "rtp",
+                            "rtp://127.0.0.1:" + std::to_string(port)});
+      sender.Wait(std::chrono::seconds(15));
+    });
+  };
+  items.push_back({"RTP from a sender not on allowed_senders (only 10.9.9.9)", FAILED,
+                   StatusCode::kDeadlineExceeded,
+                   "no RTP video arrived within start_timeout_ms=3000",
+                   [rtp_from_ffmpeg] { return rtp_from_ffmpeg("10.9.9.9"); }});
+  items.push_back({"RTP from an allowed sender (127.0.0.1)", v1::Session::FINISHED, StatusCode::kOk,
+                   "receive_timeout_ms=1000", [rtp_from_ffmpeg] {
+                     Outcome o = rtp_from_ffmpeg("127.0.0.1");
+                     if (o.message.find("no poses") != std::string::npos)
+                       o.code = StatusCode::kUnknown;
+                     return o;
+                   }});
+  items.push_back({"RTP allowed_senders 'camera.local' (a name)", I, StatusCode::kInvalidArgument,
+                   "allowed_senders[0] 'camera.local' is not an IPv4 or IPv6 address", [this] {
+                     v1::Session r = Request();
+                     r.mutable_rtp_sdp()->set_sdp(testing::Mpeg2RtpSdp(testing::FreeRtpPort()));
+                     r.mutable_rtp_sdp()->add_allowed_senders("camera.local");
+                     return FromStatus(client_->CreateSession(r).status());
+                   }});
+  items.push_back({"RTSP pull URL with password and ?token= (GetSession shows it masked)", I,
+                   StatusCode::kOk, "rtsp://***@127.0.0.1:9/cam?token=***", [this] {
+                     v1::Session r = Request();
+                     r.clear_upload();
+                     r.mutable_rtsp_pull()->set_url("rtsp://admin:pw1@127.0.0.1:9/cam?token=t0k");
+                     r.mutable_rtsp_pull()->mutable_reconnect()->set_max_attempts(1);
+                     auto created = client_->CreateSession(r);
+                     if (!created.ok()) return FromStatus(created.status());
+                     auto got = client_->GetSession(created->name());
+                     (void)client_->StopSession(created->name());
+                     if (!got.ok()) return FromStatus(got.status());
+                     return Outcome{I, StatusCode::kOk, got->rtsp_pull().url()};
                    }});
 }
 

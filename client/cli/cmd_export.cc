@@ -55,7 +55,9 @@ int RunExport(int argc, char** argv) {
   }
 
   const std::string name = cl.positional()[0];
-  auto client = client::SlapseClient::Connect(server);
+  auto connection = ServerConnection();
+  if (!connection.ok()) return Fail("export", connection.status().message(), 2);
+  auto client = client::SlapseClient::Connect(server, *connection);
   auto session = client->GetSession(name);
   if (!session.ok()) return Fail("export", session.status().ToString());
   auto trajectory = client->GetTrajectory(name);

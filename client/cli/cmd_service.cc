@@ -5,9 +5,12 @@
 #include <google/protobuf/util/json_util.h>
 
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <memory>
 #include <sstream>
+#include <string>
+#include <vector>
 
 #include "api/convert.h"
 #include "client/cli/commands.h"
@@ -30,11 +33,14 @@ int ParseOrExit(CommandLine& cl, int argc, char** argv, size_t positional) {
   return -1;
 }
 
+// A client of `server` as the connection flags say (AddServerFlag); a bad
+// flag (unreadable CA, ...) ends the process with the usage error.
 std::unique_ptr<client::SlapseClient> Connect(const std::string& server,
                                               double watch_timeout_s = 0) {
-  client::ClientOptions o;
-  o.watch_timeout_s = watch_timeout_s;
-  return client::SlapseClient::Connect(server, o);
+  auto o = ServerConnection();
+  if (!o.ok()) std::exit(Fail("client", o.status().message(), 2));
+  o->watch_timeout_s = watch_timeout_s;
+  return client::SlapseClient::Connect(server, *o);
 }
 
 std::string Json(const google::protobuf::Message& m) {
@@ -86,13 +92,15 @@ int RunServe(int argc, char** argv) {
   CommandLine cl("serve", "[options]   (runs until SIGINT or SIGTERM, then shuts down gracefully)");
   CLI::App& app = cl.app();
   server::ServerOptions o;
-  o.address = "0.0.0.0";  // the CLI serves every interface; the library binds 127.0.0.1
+  o.address = "";  // chosen after parsing: see --address
   int64_t port = o.port, max_sessions = o.sessions.max_sessions;
   int64_t max_upload_mb = o.sessions.max_upload_bytes >> 20;
   int64_t ring = static_cast<int64_t>(o.sessions.event_ring_capacity);
-  app.add_option("--address", o.address, "address to listen on")
-      ->type_name("ADDR")
-      ->capture_default_str();
+  app.add_option("--address", o.address,
+                 "address to listen on (default: 0.0.0.0 when TLS and --tokens-file are both "
+                 "given or with --insecure, else 127.0.0.1 only; any non-loopback address "
+                 "without them is refused)")
+      ->type_name("ADDR");
   app.add_option("--port", port, "TCP port (0: pick a free one)")
       ->type_name("PORT")
       ->capture_default_str();
@@ -135,10 +143,40 @@ int RunServe(int argc, char** argv) {
                  "becomes EXPIRED; 0: kept until deleted)")
       ->type_name("S")
       ->capture_default_str();
+  app.add_option("--tls-cert", o.auth.tls_cert_file,
+                 "server certificate chain (PEM); with --tls-key the server speaks TLS only")
+      ->type_name("FILE");
+  app.add_option("--tls-key", o.auth.tls_key_file, "the certificate's private key (PEM)")
+      ->type_name("FILE");
+  app.add_option("--tls-client-ca", o.auth.tls_client_ca_file,
+                 "CA bundle (PEM): clients must present a certificate it signed (mTLS)")
+      ->type_name("FILE");
+  app.add_option("--tokens-file", o.auth.tokens_file,
+                 "bearer tokens -> tenants (JSON, see README 'Secure setup'); every rpc needs "
+                 "a token and a tenant sees only its sessions; re-read when it changes and on "
+                 "SIGHUP (default: $SLAPSE_TOKENS_FILE)")
+      ->type_name("FILE");
+  app.add_option("--tokens-reload-ms", o.auth.tokens_reload_interval_ms,
+                 "how often the tokens file is checked for a change, ms (0: at every rpc)")
+      ->type_name("MS")
+      ->capture_default_str();
+  app.add_flag("--insecure", o.auth.allow_insecure,
+               "allow a non-loopback --address without TLS and tokens (anyone who reaches the "
+               "port can read, stop and delete every session)");
   if (int rc = ParseOrExit(cl, argc, argv, 0); rc >= 0) return rc;
+  if (o.auth.tokens_file.empty()) {
+    const char* env = std::getenv("SLAPSE_TOKENS_FILE");
+    if (env != nullptr) o.auth.tokens_file = env;
+  }
+  if (o.address.empty()) {
+    const bool protected_ = o.auth.tls() && o.auth.tokens();
+    o.address = protected_ || o.auth.allow_insecure ? "0.0.0.0" : "127.0.0.1";
+  }
   for (const Status& s :
        {CheckRange("retention-ttl-s", retention_ttl_s, int64_t{0}, int64_t{1} << 40),
         CheckRange("port", port, int64_t{0}, int64_t{65535}),
+        CheckRange("tokens-reload-ms", o.auth.tokens_reload_interval_ms, int64_t{0},
+                   int64_t{1} << 31),
         CheckRange("max-sessions", max_sessions, int64_t{1}, int64_t{1024}),
         CheckRange("max-upload-mb", max_upload_mb, int64_t{0}, int64_t{1} << 30),
         CheckRange("event-ring", ring, int64_t{1}, int64_t{1} << 24),
@@ -159,16 +197,24 @@ int RunServe(int argc, char** argv) {
   sigemptyset(&signals);
   sigaddset(&signals, SIGINT);
   sigaddset(&signals, SIGTERM);
+  sigaddset(&signals, SIGHUP);  // re-read the tokens file
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
 
   auto server = server::SlapseServer::Start(o);
   if (!server.ok()) return Fail("serve", server.status().message());
-  std::printf("slapse serving on %s:%d (max %d sessions; data in %s; health + reflection on)\n",
+  std::printf("slapse serving on %s:%d (max %d sessions; data in %s; %s; %s; health + reflection on)\n",
               o.address.c_str(), (*server)->port(), o.sessions.max_sessions,
-              o.sessions.data_dir.c_str());
+              o.sessions.data_dir.c_str(),
+              o.auth.tls() ? (o.auth.tls_client_ca_file.empty() ? "TLS"
+                                                                : "TLS with client certificates")
+                           : "plain text",
+              o.auth.tokens() ? "bearer tokens required" : "no tokens");
   std::fflush(stdout);
   int sig = 0;
-  sigwait(&signals, &sig);
+  while (sigwait(&signals, &sig) == 0 && sig == SIGHUP) {
+    const Status reloaded = (*server)->ReloadTokens();
+    if (reloaded.ok()) std::fprintf(stderr, "slapse serve: SIGHUP, tokens reloaded\n");
+  }
   std::fprintf(stderr, "slapse serve: %s, shutting down\n", sig == SIGINT ? "SIGINT" : "SIGTERM");
   (*server)->Shutdown();
   return 0;
@@ -183,6 +229,7 @@ struct SourceFlags {
   int64_t start_timeout_ms = 0, receive_timeout_ms = 0;
   int64_t reconnect_attempts = 0, reconnect_interval_ms = 0, reconnect_max_interval_ms = 0;
   double reconnect_backoff = 0;
+  std::vector<std::string> allow_senders;  // RtpSdp.allowed_senders
 };
 
 void AddSourceFlags(CLI::App& app, SourceFlags* f) {
@@ -196,6 +243,10 @@ void AddSourceFlags(CLI::App& app, SourceFlags* f) {
   app.add_option("--rtp-sdp", f->rtp_sdp,
                  "the server receives the RTP that this SDP file describes")
       ->type_name("FILE");
+  app.add_option("--allow-sender", f->allow_senders,
+                 "with --rtp-sdp: accept RTP from this IPv4/IPv6 address only (repeatable; "
+                 "default: any sender)")
+      ->type_name("ADDR");
   // 0 = the server's default (the request's proto fields say so).
   app.add_option("--start-timeout-ms", f->start_timeout_ms,
                  "network sources: wait for the first frame (0: 60000)")
@@ -229,6 +280,9 @@ Status SetSource(const CommandLine& cl, const SourceFlags& f, v1::Session* reque
   if (sources != 1) {
     return InvalidArgumentError(
         "give one source: --upload, --rtsp-pull URL, --rtsp-push PATH or --rtp-sdp FILE");
+  }
+  if (!f.allow_senders.empty() && !cl.Has("rtp-sdp")) {
+    return InvalidArgumentError("--allow-sender is for --rtp-sdp sessions");
   }
   SLAPSE_RETURN_IF_ERROR(
       CheckRange("start-timeout-ms", f.start_timeout_ms, int64_t{0}, int64_t{3600000}));
@@ -265,6 +319,7 @@ Status SetSource(const CommandLine& cl, const SourceFlags& f, v1::Session* reque
     request->mutable_rtp_sdp()->set_sdp(sdp.str());
     request->mutable_rtp_sdp()->set_start_timeout_ms(start_ms);
     request->mutable_rtp_sdp()->set_receive_timeout_ms(receive_ms);
+    for (const std::string& a : f.allow_senders) request->mutable_rtp_sdp()->add_allowed_senders(a);
   } else {
     request->mutable_upload();
   }

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <sstream>
 
@@ -121,12 +122,46 @@ StatusOr<Intrinsics> IntrinsicsFor(const std::string& spec, const std::string& i
   return ParseIntrinsicsSpec(beside.string(), width_px, height_px);
 }
 
+namespace {
+
+// What AddServerFlag's security flags were given (one command per process).
+client::ClientOptions& ConnectionFlags() {
+  static client::ClientOptions options;
+  return options;
+}
+
+}  // namespace
+
 void AddServerFlag(CommandLine* command_line, std::string* server) {
   *server = "localhost:" + std::to_string(server::ServerOptions{}.port);
-  command_line->app()
-      .add_option("--server", *server, "the slapse server")
+  CLI::App& app = command_line->app();
+  app.add_option("--server", *server, "the slapse server")
       ->type_name("HOST:PORT")
       ->capture_default_str();
+  client::ClientOptions& o = ConnectionFlags();
+  app.add_flag("--tls", o.tls, "talk TLS to the server (serve --tls-cert)");
+  app.add_option("--ca", o.tls_ca_file,
+                 "with --tls: PEM of the CA that signed the server's certificate (default: the "
+                 "system's roots)")
+      ->type_name("FILE");
+  app.add_option("--cert", o.tls_cert_file,
+                 "with --tls: this client's certificate (PEM), for a server with --tls-client-ca")
+      ->type_name("FILE");
+  app.add_option("--key", o.tls_key_file, "with --cert: its private key (PEM)")->type_name("FILE");
+  app.add_option("--token", o.token,
+                 "bearer token for a server with --tokens-file (default: $SLAPSE_TOKEN; the "
+                 "variable keeps it out of the process list and shell history)")
+      ->type_name("TOKEN");
+}
+
+StatusOr<client::ClientOptions> ServerConnection() {
+  client::ClientOptions o = ConnectionFlags();
+  if (o.token.empty()) {
+    const char* env = std::getenv("SLAPSE_TOKEN");
+    if (env != nullptr) o.token = env;
+  }
+  SLAPSE_RETURN_IF_ERROR(o.Check());
+  return o;
 }
 
 }  // namespace slapse::cli

@@ -11,6 +11,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "client/lib/client.h"
 #include "core/common/camera.h"
 #include "core/common/status.h"
 #include "core/pipeline/pipeline.h"
@@ -47,8 +48,15 @@ Status CheckRange(const std::string& name, double v, double min, double max);
 Status CheckRange(const std::string& name, int64_t v, int64_t min, int64_t max);
 
 // --server HOST:PORT (the client commands), default: this machine on the
-// server's default port (ServerOptions).
+// server's default port (ServerOptions). It also adds how to reach the
+// server: --tls, --ca FILE, --cert FILE, --key FILE and --token TOKEN
+// (default: the SLAPSE_TOKEN environment variable), which ServerConnection()
+// returns after parsing (one command runs per process).
 void AddServerFlag(CommandLine* command_line, std::string* server);
+
+// The client options those flags ask for (TLS, files, token), or the usage
+// error (ClientOptions::Check); timeouts are the library's defaults.
+StatusOr<client::ClientOptions> ServerConnection();
 
 // The metric-scale flags shared by `run` and `create`: --first-step-m,
 // --speed-kmh, --camera-height-m (at most one).

@@ -2,6 +2,8 @@
 
 #include <chrono>
 #include <fstream>
+#include <sstream>
+#include <utility>
 
 #include <grpcpp/create_channel.h>
 #include <grpcpp/security/credentials.h>
@@ -17,13 +19,57 @@ SlapseClient::SlapseClient(std::shared_ptr<v1::SlapseService::StubInterface> stu
                            ClientOptions options)
     : stub_(std::move(stub)), options_(options) {}
 
+namespace {
+
+// The whole file, or "" if it cannot be read.
+std::string ReadText(const std::string& path) {
+  if (path.empty()) return "";
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return in ? ss.str() : "";
+}
+
+}  // namespace
+
+Status ClientOptions::Check() const {
+  if (!tls && (!tls_ca_file.empty() || !tls_cert_file.empty() || !tls_key_file.empty())) {
+    return InvalidArgumentError("a CA or client certificate was given without --tls");
+  }
+  if (tls_cert_file.empty() != tls_key_file.empty()) {
+    return InvalidArgumentError("a client certificate needs its key (--cert and --key)");
+  }
+  for (const auto& [flag, path] : {std::pair<std::string, std::string>{"--ca", tls_ca_file},
+                                   {"--cert", tls_cert_file},
+                                   {"--key", tls_key_file}}) {
+    if (!path.empty() && ReadText(path).empty()) {
+      return InvalidArgumentError(flag + " '" + path + "' cannot be read (or is empty)");
+    }
+  }
+  for (char c : token) {
+    if (static_cast<unsigned char>(c) <= 0x20 || c == 0x7f) {
+      return InvalidArgumentError("the token has a space or control character in it");
+    }
+  }
+  return Status::Ok();
+}
+
 std::unique_ptr<SlapseClient> SlapseClient::Connect(const std::string& target,
                                                     ClientOptions options) {
-  auto channel = grpc::CreateChannel(target, grpc::InsecureChannelCredentials());
+  std::shared_ptr<grpc::ChannelCredentials> credentials = grpc::InsecureChannelCredentials();
+  if (options.tls) {
+    grpc::SslCredentialsOptions ssl;
+    ssl.pem_root_certs = ReadText(options.tls_ca_file);
+    ssl.pem_cert_chain = ReadText(options.tls_cert_file);
+    ssl.pem_private_key = ReadText(options.tls_key_file);
+    credentials = grpc::SslCredentials(ssl);
+  }
+  auto channel = grpc::CreateChannel(target, credentials);
   return std::make_unique<SlapseClient>(v1::SlapseService::NewStub(channel), options);
 }
 
-void SlapseClient::SetDeadline(grpc::ClientContext* context, double timeout_s) const {
+void SlapseClient::PrepareContext(grpc::ClientContext* context, double timeout_s) const {
+  if (!options_.token.empty()) context->AddMetadata("authorization", "Bearer " + options_.token);
   if (timeout_s <= 0) return;
   context->set_deadline(std::chrono::system_clock::now() +
                         std::chrono::duration_cast<std::chrono::system_clock::duration>(
@@ -43,7 +89,7 @@ StatusOr<Response> Result(const grpc::Status& s, Response response) {
 template <typename Request, typename Response, typename Method>
 StatusOr<Response> SlapseClient::Unary(Method method, const Request& request) {
   grpc::ClientContext context;
-  SetDeadline(&context, options_.rpc_timeout_s);
+  PrepareContext(&context, options_.rpc_timeout_s);
   Response response;
   const grpc::Status s = ((*stub_).*method)(&context, request, &response);
   return Result(s, std::move(response));
@@ -76,7 +122,7 @@ StatusOr<v1::ListSessionsResponse> SlapseClient::ListSessions(int page_size,
 
 Status SlapseClient::DeleteSession(const std::string& name) {
   grpc::ClientContext context;
-  SetDeadline(&context, options_.rpc_timeout_s);
+  PrepareContext(&context, options_.rpc_timeout_s);
   v1::DeleteSessionRequest request;
   request.set_name(name);
   v1::DeleteSessionResponse response;
@@ -140,7 +186,7 @@ StatusOr<v1::PlaneMap> SlapseClient::GetPlaneMap(const std::string& name) {
 StatusOr<v1::Session> SlapseClient::Upload(const std::string& name,
                                            const std::function<bool(std::string*)>& next_chunk) {
   grpc::ClientContext context;
-  SetDeadline(&context, options_.upload_timeout_s);
+  PrepareContext(&context, options_.upload_timeout_s);
   v1::Session response;
   std::unique_ptr<grpc::ClientWriterInterface<v1::UploadChunk>> writer =
       stub_->UploadStream(&context, &response);
@@ -187,7 +233,7 @@ StatusOr<v1::Session> SlapseClient::UploadFile(const std::string& name, const st
 Status SlapseClient::Watch(const std::string& name, uint64_t after_sequence,
                            const std::function<bool(const v1::SessionEvent&)>& on_event) {
   grpc::ClientContext context;
-  SetDeadline(&context, options_.watch_timeout_s);
+  PrepareContext(&context, options_.watch_timeout_s);
   v1::WatchSessionRequest request;
   request.set_name(name);
   request.set_after_sequence(after_sequence);

@@ -33,6 +33,22 @@ struct ClientOptions {
   // Points (planes) per GetTrajectory (GetPlaneMap) page when fetching a
   // whole snapshot: 20 000 points are ~2 MB, under gRPC's 4 MB message cap.
   int page_size = 20000;
+  // TLS on/off. tls_ca_file: PEM bundle of the CA that signed the server's
+  // certificate (empty: the system's roots). tls_cert_file + tls_key_file:
+  // this client's certificate and key (PEM) for a server that wants mTLS.
+  bool tls = false;
+  std::string tls_ca_file;
+  std::string tls_cert_file;
+  std::string tls_key_file;
+  // Bearer token sent with every rpc as "authorization: Bearer <token>";
+  // empty: none. (gRPC's call credentials would refuse a plain-text channel,
+  // which a loopback server may use, so it is plain metadata.)
+  std::string token;
+
+  // INVALID_ARGUMENT for TLS files without --tls, a certificate without its
+  // key (or the reverse), an unreadable file, or a token with a space or a
+  // control character in it.
+  Status Check() const;
 };
 
 // grpc::Status -> slapse::Status (codes are numerically equal).
@@ -41,7 +57,9 @@ Status FromGrpcStatus(const grpc::Status& s);
 class SlapseClient {
  public:
   SlapseClient(std::shared_ptr<v1::SlapseService::StubInterface> stub, ClientOptions options = {});
-  // An insecure channel to `target` ("host:port").
+  // A channel to `target` ("host:port"): TLS with `options`' files when
+  // options.tls, else plain text. Call options.Check() first: a file that
+  // cannot be read here leaves the channel without it, which fails closed.
   static std::unique_ptr<SlapseClient> Connect(const std::string& target,
                                                ClientOptions options = {});
 
@@ -73,7 +91,8 @@ class SlapseClient {
   // Streams chunks from `next_chunk` (fills one, returns false after the last).
   StatusOr<v1::Session> Upload(const std::string& name,
                                const std::function<bool(std::string*)>& next_chunk);
-  void SetDeadline(grpc::ClientContext* context, double timeout_s) const;
+  // The deadline (none for timeout_s <= 0) and the bearer token of an rpc.
+  void PrepareContext(grpc::ClientContext* context, double timeout_s) const;
   // One unary rpc with the client's deadline: (stub->*method)(ctx, request, &response).
   template <typename Request, typename Response, typename Method>
   StatusOr<Response> Unary(Method method, const Request& request);
