@@ -6,9 +6,38 @@
 #include <grpcpp/server_builder.h>
 
 namespace slapse::server {
+namespace {
+
+// Adds the reflection service to one builder (InitProtoReflectionServerBuilderPlugin
+// would add it to every server of the process).
+class ReflectionOption : public grpc::ServerBuilderOption {
+ public:
+  void UpdateArguments(grpc::ChannelArguments*) override {}
+  void UpdatePlugins(std::vector<std::unique_ptr<grpc::ServerBuilderPlugin>>* plugins) override {
+    plugins->push_back(std::make_unique<grpc::reflection::ProtoServerReflectionPlugin>());
+  }
+};
+
+}  // namespace
 
 SlapseServer::SlapseServer(const ServerOptions& options)
-    : options_(options), manager_(options.sessions), service_(&manager_) {}
+    : options_(options),
+      manager_(options.sessions),
+      service_(&manager_),
+      metrics_(std::make_unique<ServerMetrics>(&manager_)) {}
+
+Status SlapseServer::StartHttp() {
+  if (options_.http_port == 0) return Status::Ok();
+  http_ = std::make_unique<HttpServer>();
+  http_->Get("/metrics", [this](const HttpRequest&) {
+    return HttpResponse{200, kPrometheusContentType, metrics_->Exposition()};
+  });
+  http_->Get("/healthz", [](const HttpRequest&) {
+    return HttpResponse{200, "text/plain", "ok\n"};
+  });
+  return http_->Start(options_.address,
+                      options_.http_port == ServerOptions::kAnyFreePort ? 0 : options_.http_port);
+}
 
 StatusOr<std::unique_ptr<SlapseServer>> SlapseServer::Start(const ServerOptions& options) {
   if (options.port < 0 || options.port > 65535) {
@@ -17,18 +46,27 @@ StatusOr<std::unique_ptr<SlapseServer>> SlapseServer::Start(const ServerOptions&
   if (options.sessions.max_sessions < 1) {
     return InvalidArgumentError("max_sessions must be >= 1");
   }
+  if (options.http_port < ServerOptions::kAnyFreePort || options.http_port > 65535) {
+    return InvalidArgumentError("http_port must be in [0, 65535] (or kAnyFreePort), got " +
+                                std::to_string(options.http_port));
+  }
   grpc::EnableDefaultHealthCheckService(true);
-  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   std::unique_ptr<SlapseServer> server(new SlapseServer(options));
   grpc::ServerBuilder builder;
   const std::string address = options.address + ":" + std::to_string(options.port);
   builder.AddListeningPort(address, grpc::InsecureServerCredentials(), &server->port_);
   builder.RegisterService(&server->service_);
   builder.SetMaxReceiveMessageSize(16 << 20);
+  if (options.reflection) builder.SetOption(std::make_unique<ReflectionOption>());
+  builder.experimental().SetInterceptorCreators(server->metrics_->InterceptorFactories());
   server->server_ = builder.BuildAndStart();
   if (server->server_ == nullptr || server->port_ == 0) {
     return UnavailableError("cannot listen on " + address + " (in use, or not a local address?)");
   }
+  if (auto* health = server->server_->GetHealthCheckService()) {
+    health->SetServingStatus(v1::SlapseService::service_full_name(), true);
+  }
+  if (Status http = server->StartHttp(); !http.ok()) return http;  // ~SlapseServer shuts down
   return server;
 }
 
@@ -38,6 +76,7 @@ void SlapseServer::Shutdown() {
   std::lock_guard<std::mutex> lock(shutdown_mu_);
   if (shut_down_) return;
   shut_down_ = true;
+  if (http_ != nullptr) http_->Stop();
   if (server_ == nullptr) return;
   if (auto* health = server_->GetHealthCheckService()) health->Shutdown();
   // Sessions first: that ends watch streams and blocked uploads, so the

@@ -4,6 +4,8 @@
 
 #include <chrono>
 
+#include "server/log.h"
+
 namespace slapse::server {
 
 using google::protobuf::util::TimeUtil;
@@ -36,6 +38,8 @@ bool Session::TransitionLocked(v1::Session::State state, const Status& why,
   e.mutable_state_change()->set_message(text);
   e.mutable_state_change()->set_error_code(static_cast<int>(why.code()));
   events->Append(std::move(e));
+  Log(state == v1::Session::FAILED ? LogLevel::kError : LogLevel::kInfo, name, "state",
+      v1::Session::State_Name(state) + (text.empty() ? "" : ": " + text));
   if (IsTerminal(state)) {
     events->Close();
     upload->Close(why.ok()

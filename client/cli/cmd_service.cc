@@ -15,6 +15,7 @@
 #include "client/lib/client.h"
 #include "core/common/intrinsics_io.h"
 #include "core/planes/plane_extraction.h"
+#include "server/log.h"
 #include "server/server.h"
 
 namespace slapse::cli {
@@ -119,7 +120,29 @@ int RunServe(int argc, char** argv) {
                  "address RTSP push listeners bind and advertise")
       ->type_name("IPV4")
       ->capture_default_str();
+  int64_t http_port = 8080;  // the CLI's fixed, documented port (docs/DEPLOY.md)
+  app.add_option("--http-port", http_port,
+                 "HTTP port for /metrics (Prometheus) and /healthz, same address (0: off)")
+      ->type_name("PORT")
+      ->capture_default_str();
+  app.add_flag("--reflection,!--no-reflection", o.reflection,
+               "serve gRPC reflection (grpcurl and the like can list the rpcs)")
+      ->capture_default_str();
+  std::string log_format = "text";
+  app.add_option("--log-format", log_format,
+                 "stderr log: text, or json (JSON lines: time, level, session, event, message)")
+      ->type_name("FORMAT")
+      ->capture_default_str();
   if (int rc = ParseOrExit(cl, argc, argv, 0); rc >= 0) return rc;
+  server::LogOptions log_options;
+  if (std::string error; !server::ParseLogFormat(log_format, &log_options.format, &error)) {
+    return Fail("serve", "--" + error, 2);
+  }
+  if (Status s = CheckRange("http-port", http_port, int64_t{0}, int64_t{65535}); !s.ok()) {
+    return Fail("serve", s.message(), 2);
+  }
+  o.http_port = static_cast<int>(http_port);
+  server::ConfigureLog(log_options);
   for (const Status& s :
        {CheckRange("port", port, int64_t{0}, int64_t{65535}),
         CheckRange("max-sessions", max_sessions, int64_t{1}, int64_t{1024}),
@@ -145,12 +168,22 @@ int RunServe(int argc, char** argv) {
 
   auto server = server::SlapseServer::Start(o);
   if (!server.ok()) return Fail("serve", server.status().message());
-  std::printf("slapse serving on %s:%d (max %d sessions; health + reflection on)\n",
-              o.address.c_str(), (*server)->port(), o.sessions.max_sessions);
+  std::printf("slapse serving on %s:%d (max %d sessions; health%s on)\n", o.address.c_str(),
+              (*server)->port(), o.sessions.max_sessions, o.reflection ? " + reflection" : "");
+  if ((*server)->http_port() != 0) {
+    std::printf("slapse metrics on http://%s:%d/metrics\n", o.address.c_str(),
+                (*server)->http_port());
+  }
   std::fflush(stdout);
+  server::Log(server::LogLevel::kInfo, "", "serve",
+              "gRPC on " + o.address + ":" + std::to_string((*server)->port()) +
+                  ((*server)->http_port() != 0
+                       ? ", HTTP on " + o.address + ":" + std::to_string((*server)->http_port())
+                       : std::string(", no HTTP")));
   int sig = 0;
   sigwait(&signals, &sig);
-  std::fprintf(stderr, "slapse serve: %s, shutting down\n", sig == SIGINT ? "SIGINT" : "SIGTERM");
+  server::Log(server::LogLevel::kInfo, "", "shutdown",
+              std::string(sig == SIGINT ? "SIGINT" : "SIGTERM") + ", shutting down");
   (*server)->Shutdown();
   return 0;
 }
