@@ -5,11 +5,13 @@
 #   install-deps.sh --build    what building slapse needs (the Dockerfile's build stage)
 #   install-deps.sh --runtime  the shared libraries the built slapse binary loads, and
 #                              nothing else (the Dockerfile's runtime stage)
+#   install-deps.sh --camera   a simulated camera: ffmpeg (deploy/compose camera image)
+#   install-deps.sh --prometheus   Prometheus (deploy/compose prometheus image)
 set -euo pipefail
 MODE="${1:-all}"
 case "$MODE" in
-  all | --build | --runtime) ;;
-  *) echo "install-deps: unknown mode '$MODE' (none, --build or --runtime)" >&2; exit 2 ;;
+  all | --build | --runtime | --camera | --prometheus) ;;
+  *) echo "install-deps: unknown mode '$MODE' (none, --build, --runtime, --camera, --prometheus)" >&2; exit 2 ;;
 esac
 
 SUDO=""
@@ -62,6 +64,8 @@ case "$MODE" in
   all) PACKAGES=("${BUILD_PACKAGES[@]}" "${TEST_PACKAGES[@]}") ;;
   --build) PACKAGES=("${BUILD_PACKAGES[@]}") ;;
   --runtime) PACKAGES=("${RUNTIME_PACKAGES[@]}") ;;
+  --camera) PACKAGES=(ffmpeg) ;;
+  --prometheus) PACKAGES=(prometheus) ;;
 esac
 
 missing=()
