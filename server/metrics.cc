@@ -6,7 +6,6 @@
 #include <array>
 #include <map>
 #include <mutex>
-#include <optional>
 
 #include "core/common/status.h"
 #include "slapse/v1/slapse.grpc.pb.h"
@@ -130,8 +129,9 @@ std::vector<MetricFamily> SessionFamilies(const std::vector<v1::Session>& sessio
   return out;
 }
 
-// Counts one call: RpcStarted when the call starts, RpcFinished with the
-// status it sends (CANCELLED if it ended without sending one).
+// Counts one call: RpcStarted when the call starts, RpcFinished just before
+// its status is sent (so a client that has the status sees it counted), or
+// with CANCELLED when the call ends without sending one.
 class RpcMetricsInterceptor : public grpc::experimental::Interceptor {
  public:
   RpcMetricsInterceptor(ServerMetrics* metrics, std::string method)
@@ -139,12 +139,13 @@ class RpcMetricsInterceptor : public grpc::experimental::Interceptor {
     metrics_->RpcStarted(method_);
   }
   ~RpcMetricsInterceptor() override {
-    metrics_->RpcFinished(method_, code_.value_or(grpc::StatusCode::CANCELLED));
+    if (!finished_) metrics_->RpcFinished(method_, grpc::StatusCode::CANCELLED);
   }
   void Intercept(grpc::experimental::InterceptorBatchMethods* methods) override {
-    if (methods->QueryInterceptionHookPoint(
-            grpc::experimental::InterceptionHookPoints::PRE_SEND_STATUS)) {
-      code_ = methods->GetSendStatus().error_code();
+    if (!finished_ && methods->QueryInterceptionHookPoint(
+                          grpc::experimental::InterceptionHookPoints::PRE_SEND_STATUS)) {
+      finished_ = true;
+      metrics_->RpcFinished(method_, methods->GetSendStatus().error_code());
     }
     methods->Proceed();
   }
@@ -152,7 +153,7 @@ class RpcMetricsInterceptor : public grpc::experimental::Interceptor {
  private:
   ServerMetrics* metrics_;
   std::string method_;
-  std::optional<int> code_;
+  bool finished_ = false;
 };
 
 class RpcMetricsInterceptorFactory : public grpc::experimental::ServerInterceptorFactoryInterface {

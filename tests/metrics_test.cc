@@ -125,7 +125,9 @@ TEST(MetricsTest, SessionRpcsWatchersAndStagesOnMetrics) {
   EXPECT_EQ(Sample(text, "slapse_session_tracked_pairs_total" + s),
             session->stats().tracked_pairs());
   EXPECT_EQ(Sample(text, "slapse_session_planes" + s), session->stats().planes());
-  EXPECT_EQ(Sample(text, "slapse_session_fps" + s), session->stats().fps());
+  // Doubles are printed with 16 significant digits.
+  EXPECT_NEAR(Sample(text, "slapse_session_fps" + s).value_or(-1), session->stats().fps(),
+              1e-9 * session->stats().fps());
   EXPECT_EQ(Sample(text, "slapse_watchers"), 0.0);
   const std::string svc = "/slapse.v1.SlapseService/";
   EXPECT_EQ(Sample(text, "slapse_rpcs_total{code=\"INVALID_ARGUMENT\",method=\"" + svc +
