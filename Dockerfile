@@ -1,16 +1,47 @@
-# slapse in a container: the same install script as the README and CI.
-#   docker build -t slapse .
-#   docker run --rm -v "$PWD/out:/out" slapse simulate --out /out/drive
-#   docker run --rm -p 50051:50051 slapse serve --port 50051 --insecure   # the gRPC service
-#   (a container must listen on 0.0.0.0: --insecure, or TLS + tokens, README "Secure setup")
-FROM debian:12
+# slapse in a container, in two stages (docs/DEPLOY.md):
+#   build    Debian 12 + the toolchain and -dev packages (deploy/install-deps.sh --build);
+#            builds the one `slapse` binary, Release, stripped
+#   runtime  Debian 12 + only the shared libraries that binary loads
+#            (deploy/install-deps.sh --runtime); runs as the non-root user `slapse`
+#
+#   podman build --format docker -t slapse .      # --format docker keeps the HEALTHCHECK
+#   podman run --rm -d -p 50051:50051 -p 8080:8080 -v slapse-data:/var/lib/slapse slapse
+#   podman run --rm -v "$PWD/out:/out" slapse simulate --out /out/drive
+#
+# Ports: 50051 gRPC (slapse.v1.SlapseService, grpc.health.v1.Health, reflection),
+# 8080 HTTP (/metrics). Data: /var/lib/slapse (the SQLite session store).
+
+FROM debian:12 AS build
 WORKDIR /src
 COPY deploy/install-deps.sh deploy/install-deps.sh
-RUN bash deploy/install-deps.sh && rm -rf /var/lib/apt/lists/*
+RUN bash deploy/install-deps.sh --build && rm -rf /var/lib/apt/lists/*
 COPY . .
-RUN bash deploy/build.sh -DSLAPSE_BUILD_TESTS=OFF -DCMAKE_BUILD_TYPE=Release \
- && cmake --install build --prefix /usr/local \
- && rm -rf build
-EXPOSE 50051
+# The ccache directory is a build cache mount: a rebuild after a source change
+# recompiles only what changed.
+RUN --mount=type=cache,target=/ccache \
+    CCACHE_DIR=/ccache CCACHE_BASEDIR=/src \
+    cmake -S . -B /build -G Ninja -DCMAKE_BUILD_TYPE=Release -DSLAPSE_BUILD_TESTS=OFF \
+      -DCMAKE_CXX_COMPILER_LAUNCHER=ccache \
+ && CCACHE_DIR=/ccache CCACHE_BASEDIR=/src cmake --build /build --target slapse -j "$(nproc)" \
+ && strip -o /slapse /build/client/cli/slapse
+
+FROM debian:12 AS runtime
+COPY deploy/install-deps.sh /tmp/install-deps.sh
+RUN bash /tmp/install-deps.sh --runtime && rm -rf /var/lib/apt/lists/* /tmp/install-deps.sh \
+ && useradd --system --uid 10001 --user-group --home-dir /var/lib/slapse --shell /usr/sbin/nologin slapse \
+ && mkdir -p /var/lib/slapse && chown slapse:slapse /var/lib/slapse
+COPY --from=build /slapse /usr/local/bin/slapse
+USER slapse
+WORKDIR /var/lib/slapse
+VOLUME /var/lib/slapse
+EXPOSE 50051 8080
+# Healthy = the gRPC health service answers SERVING for slapse.v1.SlapseService.
+HEALTHCHECK --interval=10s --timeout=3s --start-period=5s --retries=3 \
+  CMD ["slapse", "health", "--server", "127.0.0.1:50051", "--service", "slapse.v1.SlapseService"]
 ENTRYPOINT ["slapse"]
-CMD ["--help"]
+# A container must listen on 0.0.0.0. Without TLS and tokens that needs --insecure
+# (anyone who reaches the port has every session): for a secure setup mount the
+# certificates and a tokens file and replace --insecure with --tls-cert/--tls-key/
+# --tokens-file (README "Secure setup").
+CMD ["serve", "--address", "0.0.0.0", "--insecure", "--port", "50051", "--http-port", "8080", \
+     "--data-dir", "/var/lib/slapse"]

@@ -1,7 +1,18 @@
 #!/usr/bin/env bash
 # Installs every Debian 12 package slapse needs to build, test and run.
 # Used by the README, .ci/run and the Dockerfile alike: keep this the single list.
+#   install-deps.sh            everything: build, test, fuzz (development machines, CI)
+#   install-deps.sh --build    what building slapse needs (the Dockerfile's build stage)
+#   install-deps.sh --runtime  the shared libraries the built slapse binary loads, and
+#                              nothing else (the Dockerfile's runtime stage)
+#   install-deps.sh --camera   a simulated camera: ffmpeg (deploy/compose camera image)
+#   install-deps.sh --prometheus   Prometheus (deploy/compose prometheus image)
 set -euo pipefail
+MODE="${1:-all}"
+case "$MODE" in
+  all | --build | --runtime | --camera | --prometheus) ;;
+  *) echo "install-deps: unknown mode '$MODE' (none, --build, --runtime, --camera, --prometheus)" >&2; exit 2 ;;
+esac
 
 SUDO=""
 if [ "$(id -u)" -ne 0 ]; then
@@ -9,9 +20,11 @@ if [ "$(id -u)" -ne 0 ]; then
   SUDO="sudo"
 fi
 
-PACKAGES=(
+BUILD_PACKAGES=(
   # toolchain
   build-essential cmake ninja-build pkg-config git ca-certificates
+  # compiler cache: the Dockerfile's build stage keeps one across image builds
+  ccache
   # FFmpeg: decoding with exported motion vectors, encoding (mpeg2video, mpeg4, libx264)
   libavformat-dev libavcodec-dev libavutil-dev libswscale-dev ffmpeg
   # maths and vision
@@ -23,10 +36,17 @@ PACKAGES=(
   # service persistence: sessions, events, trajectories, plane maps (server/store.cc)
   libsqlite3-dev
   # service auth (server/auth.cc): OpenSSL's SHA-256 and constant-time compare for
-  # bearer tokens; the openssl CLI makes the tests' CA and certificates
-  libssl-dev openssl
+  # bearer tokens
+  libssl-dev
+  # service: the HTTP server for /metrics (server/http_server.cc) and the Prometheus
+  # metric registry and text format (server/metrics.cc)
+  libcpp-httplib-dev prometheus-cpp-dev
+)
+TEST_PACKAGES=(
   # tests
   libgtest-dev libgmock-dev
+  # tests: the openssl CLI makes the auth tests' CA and certificates
+  openssl
   # tests: the real RTSP server the RTSP pull tests pull from (tests/rtsp_server.py):
   # GStreamer's gst-rtsp-server driven from Python; runs as root, unlike VLC.
   # tsdemux + mpegvideoparse are in plugins-bad, rtpmpvpay in plugins-good.
@@ -35,7 +55,26 @@ PACKAGES=(
   # fuzzing (fuzz/, docs/FUZZING.md): clang with libFuzzer + ASan/UBSan runtimes,
   # llvm-symbolizer for readable stacks
   clang-14 libclang-rt-14-dev llvm-14
+  # tests: promtool checks the /metrics exposition; a real Prometheus scrapes a
+  # real server in the `external` metrics test (tests/metrics_test.cc)
+  prometheus
 )
+# What the slapse binary loads at run time (ldd build/client/cli/slapse, each
+# library's package): FFmpeg 5.1, OpenCV 4.6, gRPC 1.51 / protobuf 3.21.
+RUNTIME_PACKAGES=(
+  libavformat59 libavcodec59 libavutil57 libswscale6
+  libopencv-core406 libopencv-imgproc406 libopencv-imgcodecs406 libopencv-calib3d406
+  libgrpc++1.51 libgrpc29 libprotobuf32
+  libcpp-httplib0.11 libprometheus-cpp-core1.0
+  libsqlite3-0 libssl3
+)
+case "$MODE" in
+  all) PACKAGES=("${BUILD_PACKAGES[@]}" "${TEST_PACKAGES[@]}") ;;
+  --build) PACKAGES=("${BUILD_PACKAGES[@]}") ;;
+  --runtime) PACKAGES=("${RUNTIME_PACKAGES[@]}") ;;
+  --camera) PACKAGES=(ffmpeg) ;;
+  --prometheus) PACKAGES=(prometheus) ;;
+esac
 
 missing=()
 for p in "${PACKAGES[@]}"; do

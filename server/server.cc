@@ -6,12 +6,39 @@
 #include <grpcpp/server_builder.h>
 
 namespace slapse::server {
+namespace {
+
+// Adds the reflection service to one builder (InitProtoReflectionServerBuilderPlugin
+// would add it to every server of the process).
+class ReflectionOption : public grpc::ServerBuilderOption {
+ public:
+  void UpdateArguments(grpc::ChannelArguments*) override {}
+  void UpdatePlugins(std::vector<std::unique_ptr<grpc::ServerBuilderPlugin>>* plugins) override {
+    plugins->push_back(std::make_unique<grpc::reflection::ProtoServerReflectionPlugin>());
+  }
+};
+
+}  // namespace
 
 SlapseServer::SlapseServer(const ServerOptions& options, std::unique_ptr<Authenticator> auth)
     : options_(options),
       auth_(std::move(auth)),
       manager_(options.sessions),
-      service_(&manager_, auth_.get()) {}
+      service_(&manager_, auth_.get()),
+      metrics_(std::make_unique<ServerMetrics>(&manager_)) {}
+
+Status SlapseServer::StartHttp() {
+  if (options_.http_port == 0) return Status::Ok();
+  http_ = std::make_unique<HttpServer>();
+  http_->Get("/metrics", [this](const HttpRequest&) {
+    return HttpResponse{200, kPrometheusContentType, metrics_->Exposition()};
+  });
+  http_->Get("/healthz", [](const HttpRequest&) {
+    return HttpResponse{200, "text/plain", "ok\n"};
+  });
+  return http_->Start(options_.address,
+                      options_.http_port == ServerOptions::kAnyFreePort ? 0 : options_.http_port);
+}
 
 StatusOr<std::unique_ptr<SlapseServer>> SlapseServer::Start(const ServerOptions& options) {
   if (options.port < 0 || options.port > 65535) {
@@ -23,13 +50,16 @@ StatusOr<std::unique_ptr<SlapseServer>> SlapseServer::Start(const ServerOptions&
   if (options.sessions.retention_ttl_s < 0) {
     return InvalidArgumentError("retention_ttl_s must be >= 0 (0: keep results)");
   }
+  if (options.http_port < ServerOptions::kAnyFreePort || options.http_port > 65535) {
+    return InvalidArgumentError("http_port must be in [0, 65535] (or kAnyFreePort), got " +
+                                std::to_string(options.http_port));
+  }
   SLAPSE_RETURN_IF_ERROR(CheckListenAddress(options.address, options.auth));
   auto credentials = MakeServerCredentials(options.auth);
   if (!credentials.ok()) return credentials.status();
   auto auth = Authenticator::Create(options.auth);
   if (!auth.ok()) return auth.status();
   grpc::EnableDefaultHealthCheckService(true);
-  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   std::unique_ptr<SlapseServer> server(new SlapseServer(options, std::move(*auth)));
   // Restores the stored sessions before anyone can call.
   SLAPSE_RETURN_IF_ERROR(server->manager_.Open());
@@ -38,10 +68,16 @@ StatusOr<std::unique_ptr<SlapseServer>> SlapseServer::Start(const ServerOptions&
   builder.AddListeningPort(address, *credentials, &server->port_);
   builder.RegisterService(&server->service_);
   builder.SetMaxReceiveMessageSize(16 << 20);
+  if (options.reflection) builder.SetOption(std::make_unique<ReflectionOption>());
+  builder.experimental().SetInterceptorCreators(server->metrics_->InterceptorFactories());
   server->server_ = builder.BuildAndStart();
   if (server->server_ == nullptr || server->port_ == 0) {
     return UnavailableError("cannot listen on " + address + " (in use, or not a local address?)");
   }
+  if (auto* health = server->server_->GetHealthCheckService()) {
+    health->SetServingStatus(v1::SlapseService::service_full_name(), true);
+  }
+  if (Status http = server->StartHttp(); !http.ok()) return http;  // ~SlapseServer shuts down
   return server;
 }
 
@@ -51,6 +87,7 @@ void SlapseServer::Shutdown() {
   std::lock_guard<std::mutex> lock(shutdown_mu_);
   if (shut_down_) return;
   shut_down_ = true;
+  if (http_ != nullptr) http_->Stop();
   if (server_ == nullptr) return;
   if (auto* health = server_->GetHealthCheckService()) health->Shutdown();
   // Sessions first: that ends watch streams and blocked uploads, so the

@@ -1,5 +1,8 @@
 // SlapseServer: the gRPC server (slapse.v1.SlapseService, health checking,
-// reflection) around a SessionManager.
+// reflection) around a SessionManager, and its HTTP side (/metrics).
+//
+// Health (grpc.health.v1.Health) answers per service name: "" (the server)
+// and "slapse.v1.SlapseService" are SERVING from Start() until Shutdown().
 //
 //   ServerOptions o;
 //   o.port = 0;  // ephemeral
@@ -19,6 +22,8 @@
 
 #include "core/common/status.h"
 #include "server/auth.h"
+#include "server/http_server.h"
+#include "server/metrics.h"
 #include "server/service.h"
 #include "server/session_manager.h"
 
@@ -36,6 +41,13 @@ struct ServerOptions {
   double shutdown_grace_s = 2.0;
   // TLS, bearer tokens and the insecure-bind override (server/auth.h).
   AuthOptions auth;
+  // gRPC server reflection (grpc.reflection.v1alpha), for tools like grpcurl.
+  bool reflection = true;
+  // HTTP port for /metrics (Prometheus text format) and /healthz, on
+  // `address`: 0 = no HTTP server, kAnyFreePort = a free one (see http_port()).
+  // `slapse serve` uses 8080.
+  static constexpr int kAnyFreePort = -1;
+  int http_port = 0;
 };
 
 class SlapseServer {
@@ -48,6 +60,10 @@ class SlapseServer {
   ~SlapseServer();
 
   int port() const { return port_; }
+  // The HTTP port, 0 if there is no HTTP server.
+  int http_port() const { return http_ == nullptr ? 0 : http_->port(); }
+  // What /metrics serves.
+  std::string MetricsText() const { return metrics_->Exposition(); }
   SessionManager& sessions() { return manager_; }
 
   // Graceful shutdown: stops accepting calls, stops every session (they end
@@ -61,13 +77,17 @@ class SlapseServer {
 
  private:
   SlapseServer(const ServerOptions& options, std::unique_ptr<Authenticator> auth);
+  // Serves /metrics and /healthz when options_.http_port asks for it.
+  Status StartHttp();
 
   ServerOptions options_;
   std::unique_ptr<Authenticator> auth_;
   SessionManager manager_;
   SlapseServiceImpl service_;
+  std::unique_ptr<ServerMetrics> metrics_;  // before server_: its interceptors use it
   std::unique_ptr<grpc::Server> server_;
   int port_ = 0;
+  std::unique_ptr<HttpServer> http_;
   std::mutex shutdown_mu_;
   bool shut_down_ = false;
 };

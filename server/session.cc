@@ -5,6 +5,8 @@
 #include <chrono>
 #include <cstdio>
 
+#include "server/log.h"
+
 namespace slapse::server {
 
 using google::protobuf::util::TimeUtil;
@@ -90,6 +92,8 @@ bool Session::TransitionLocked(v1::Session::State state, const Status& why,
     step.metric = metric;
     CommitStep(step, b);
   });
+  Log(state == v1::Session::FAILED ? LogLevel::kError : LogLevel::kInfo, name, "state",
+      v1::Session::State_Name(state) + (text.empty() ? "" : ": " + text));
   if (IsTerminal(state)) {
     events->Close();
     upload->Close(why.ok()

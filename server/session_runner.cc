@@ -9,6 +9,8 @@
 
 #include "api/convert.h"
 #include "api/validate.h"
+#include "server/log.h"
+#include "server/metrics.h"
 
 namespace slapse::server {
 namespace {
@@ -77,6 +79,7 @@ void SessionRunner::EndStream(const Status& status) {
 // One pass per connection: upload, RTSP push and RTP/SDP have one; RTSP pull
 // connects again after an outage while its policy allows.
 void SessionRunner::Run() {
+  LogSessionScope log_scope(session_->name);  // FFmpeg's records name the session
   if (session_->stop) return EndStream(CancelledError("stopped"));
   for (;;) {
     SetDeadline(source_->start_timeout_ms());
@@ -103,7 +106,9 @@ bool SessionRunner::RunConnection(MvReader* reader, ConnectionEnd* end) {
   FrameRecord frame;
   for (;;) {
     if (end->frames > 0) SetDeadline(source_->receive_timeout_ms());
+    StageTimer read_timer(Stage::kRead);
     end->status = reader->Next(&frame);
+    read_timer.Done();
     if (!end->status.ok()) return true;
     ++end->frames;
     ++frames_;
@@ -198,7 +203,9 @@ bool SessionRunner::Feed(FrameRecord frame) {
   last_timestamp_s_ = frame.timestamp_s;
   last_frame_wall_ = Clock::now();
   received_[frame.index] = PreciseNow();
+  StageTimer pipeline_timer(Stage::kPipeline);
   auto step = pipeline_->Push(frame);
+  pipeline_timer.Done();
   if (!step.ok()) {
     EndStream(step.status());
     return false;
@@ -208,6 +215,7 @@ bool SessionRunner::Feed(FrameRecord frame) {
 }
 
 void SessionRunner::Publish(const FrameRecord& frame, const PipelineStep* step) {
+  StageTimer publish_timer(Stage::kPublish);
   const double wall_s = std::chrono::duration<double>(Clock::now() - start_).count();
   std::optional<StepUpdates> updates;
   if (step != nullptr) updates = updates_.Next(*pipeline_, *step);

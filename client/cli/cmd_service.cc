@@ -18,6 +18,7 @@
 #include "client/lib/client.h"
 #include "core/common/intrinsics_io.h"
 #include "core/planes/plane_extraction.h"
+#include "server/log.h"
 #include "server/server.h"
 
 namespace slapse::cli {
@@ -163,7 +164,29 @@ int RunServe(int argc, char** argv) {
   app.add_flag("--insecure", o.auth.allow_insecure,
                "allow a non-loopback --address without TLS and tokens (anyone who reaches the "
                "port can read, stop and delete every session)");
+  int64_t http_port = 8080;  // the CLI's fixed, documented port (docs/DEPLOY.md)
+  app.add_option("--http-port", http_port,
+                 "HTTP port for /metrics (Prometheus) and /healthz, same address (0: off)")
+      ->type_name("PORT")
+      ->capture_default_str();
+  app.add_flag("--reflection,!--no-reflection", o.reflection,
+               "serve gRPC reflection (grpcurl and the like can list the rpcs)")
+      ->capture_default_str();
+  std::string log_format = "text";
+  app.add_option("--log-format", log_format,
+                 "stderr log: text, or json (JSON lines: time, level, session, event, message)")
+      ->type_name("FORMAT")
+      ->capture_default_str();
   if (int rc = ParseOrExit(cl, argc, argv, 0); rc >= 0) return rc;
+  server::LogOptions log_options;
+  if (std::string error; !server::ParseLogFormat(log_format, &log_options.format, &error)) {
+    return Fail("serve", "--" + error, 2);
+  }
+  if (Status s = CheckRange("http-port", http_port, int64_t{0}, int64_t{65535}); !s.ok()) {
+    return Fail("serve", s.message(), 2);
+  }
+  o.http_port = static_cast<int>(http_port);
+  server::ConfigureLog(log_options);
   if (o.auth.tokens_file.empty()) {
     const char* env = std::getenv("SLAPSE_TOKENS_FILE");
     if (env != nullptr) o.auth.tokens_file = env;
@@ -202,20 +225,31 @@ int RunServe(int argc, char** argv) {
 
   auto server = server::SlapseServer::Start(o);
   if (!server.ok()) return Fail("serve", server.status().message());
-  std::printf("slapse serving on %s:%d (max %d sessions; data in %s; %s; %s; health + reflection on)\n",
+  std::printf("slapse serving on %s:%d (max %d sessions; data in %s; %s; %s; health%s on)\n",
               o.address.c_str(), (*server)->port(), o.sessions.max_sessions,
               o.sessions.data_dir.c_str(),
               o.auth.tls() ? (o.auth.tls_client_ca_file.empty() ? "TLS"
                                                                 : "TLS with client certificates")
                            : "plain text",
-              o.auth.tokens() ? "bearer tokens required" : "no tokens");
+              o.auth.tokens() ? "bearer tokens required" : "no tokens",
+              o.reflection ? " + reflection" : "");
+  if ((*server)->http_port() != 0) {
+    std::printf("slapse metrics on http://%s:%d/metrics\n", o.address.c_str(),
+                (*server)->http_port());
+  }
   std::fflush(stdout);
+  server::Log(server::LogLevel::kInfo, "", "serve",
+              "gRPC on " + o.address + ":" + std::to_string((*server)->port()) +
+                  ((*server)->http_port() != 0
+                       ? ", HTTP on " + o.address + ":" + std::to_string((*server)->http_port())
+                       : std::string(", no HTTP")));
   int sig = 0;
   while (sigwait(&signals, &sig) == 0 && sig == SIGHUP) {
     const Status reloaded = (*server)->ReloadTokens();
-    if (reloaded.ok()) std::fprintf(stderr, "slapse serve: SIGHUP, tokens reloaded\n");
+    if (reloaded.ok()) server::Log(server::LogLevel::kInfo, "", "tokens", "SIGHUP: tokens reloaded");
   }
-  std::fprintf(stderr, "slapse serve: %s, shutting down\n", sig == SIGINT ? "SIGINT" : "SIGTERM");
+  server::Log(server::LogLevel::kInfo, "", "shutdown",
+              std::string(sig == SIGINT ? "SIGINT" : "SIGTERM") + ", shutting down");
   (*server)->Shutdown();
   return 0;
 }

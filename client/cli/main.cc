@@ -45,6 +45,8 @@ const Command kCommands[] = {
     {"delete", slapse::cli::RunDelete, "stop and forget a session"},
     {"export", slapse::cli::RunExport,
      "a session's trajectory / plane map from a server as TUM, KITTI or JSON files"},
+    {"health", slapse::cli::RunHealth,
+     "ask a server's gRPC health service whether a service is SERVING (exit 0)"},
 };
 
 void PrintUsage(FILE* out) {
