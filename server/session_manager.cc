@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cstdlib>
 
+#include "api/list_query.h"
 #include "api/validate.h"
 #include "server/ingest_source.h"
 #include "server/session_runner.h"
@@ -58,6 +59,7 @@ StatusOr<v1::Session> SessionManager::Create(const v1::Session& request) {
     s->proto.clear_stats();
     s->proto.clear_error();
     s->proto.clear_ingest_url();
+    s->proto.clear_codec();
     if (request.has_rtsp_push()) {
       auto url = RtspPushIngestUrl(options_.rtsp_push_host, request.rtsp_push().path());
       if (!url.ok()) return url.status();
@@ -97,38 +99,15 @@ StatusOr<v1::Session> SessionManager::Get(const std::string& name) const {
 
 StatusOr<v1::ListSessionsResponse> SessionManager::List(
     const v1::ListSessionsRequest& request) const {
-  SLAPSE_RETURN_IF_ERROR(api::ValidateListRequest(request));
-  const size_t page_size =
-      request.page_size() == 0 ? 50 : std::min<size_t>(request.page_size(), 1000);
-  uint64_t after = 0;
-  if (!request.page_token().empty()) {
-    char* end = nullptr;
-    after = std::strtoull(request.page_token().c_str(), &end, 10);
-    if (end == nullptr || *end != '\0') return InvalidArgumentError("bad page_token");
-  }
-  std::vector<std::shared_ptr<Session>> candidates;
+  std::vector<std::shared_ptr<Session>> all;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    for (auto it = sessions_.upper_bound(after); it != sessions_.end(); ++it) {
-      candidates.push_back(it->second);
-    }
+    for (const auto& [id, s] : sessions_) all.push_back(s);
   }
-  v1::ListSessionsResponse out;
-  for (size_t i = 0; i < candidates.size(); ++i) {
-    v1::Session snap = candidates[i]->Snapshot();
-    if (request.state_filter() != v1::Session::STATE_UNSPECIFIED &&
-        snap.state() != request.state_filter()) {
-      continue;
-    }
-    if (static_cast<size_t>(out.sessions_size()) == page_size) {
-      // More follow: the token is the id of the last session returned.
-      const std::string& last = out.sessions(out.sessions_size() - 1).name();
-      out.set_next_page_token(last.substr(std::string("sessions/").size()));
-      break;
-    }
-    *out.add_sessions() = std::move(snap);
-  }
-  return out;
+  std::vector<v1::Session> snapshots;
+  snapshots.reserve(all.size());
+  for (const auto& s : all) snapshots.push_back(s->Snapshot());
+  return api::ApplyListQuery(std::move(snapshots), request);
 }
 
 StatusOr<v1::Session> SessionManager::Stop(const std::string& name) {
