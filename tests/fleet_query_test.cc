@@ -84,8 +84,12 @@ TEST_F(FleetQueryTest, LabelsCodecFilterAndOrderReachTheServer) {
   // The depot camera streams; its codec appears once the stream opens.
   auto uploaded = client_->UploadFile(depot->name(), drive_.video_path);
   ASSERT_TRUE(uploaded.ok()) << uploaded.status().ToString();
+  // The upload returns once the bytes are buffered; watch to the end.
+  Status watched = client_->Watch(depot->name(), 0, [](const v1::SessionEvent&) { return true; });
+  EXPECT_TRUE(watched.ok()) << watched.ToString();
   auto got = client_->GetSession(depot->name());
   ASSERT_TRUE(got.ok());
+  EXPECT_EQ(got->state(), v1::Session::FINISHED) << got->state_message();
   EXPECT_EQ(got->codec(), "mpeg2video");
   EXPECT_EQ(got->labels().at("site"), "depot");
 
