@@ -9,6 +9,7 @@
 #include <cstdlib>
 
 #include "api/convert.h"
+#include "api/list_query.h"
 #include "core/common/angles.h"
 #include "core/common/camera.h"
 
@@ -410,7 +411,36 @@ Status ValidateSession(const v1::Session& r) {
     SLAPSE_RETURN_IF_ERROR(ValidateIntrinsicsForImage(
         k, k.width_px(), k.height_px(), "intrinsics (for their width_px x height_px)"));
   }
+  SLAPSE_RETURN_IF_ERROR(ValidateLabels(r.labels()));
   return ValidatePipelineOptions(r.pipeline_options());
+}
+
+Status ValidateLabels(const google::protobuf::Map<std::string, std::string>& labels) {
+  if (labels.size() > kMaxLabels) {
+    return InvalidArgumentError("session.labels has " + std::to_string(labels.size()) +
+                                " labels; at most " + std::to_string(kMaxLabels));
+  }
+  for (const auto& [key, value] : labels) {
+    const bool key_ok =
+        !key.empty() && key.size() <= kMaxLabelKeyChars && key[0] >= 'a' && key[0] <= 'z' &&
+        std::all_of(key.begin(), key.end(), [](char c) {
+          return (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '_' || c == '.' ||
+                 c == '-';
+        });
+    if (!key_ok) {
+      return InvalidArgumentError("session.labels: key '" + key.substr(0, kMaxLabelKeyChars) +
+                                  "' must be 1-" + std::to_string(kMaxLabelKeyChars) +
+                                  " of [a-z0-9_.-] starting with a letter");
+    }
+    if (value.size() > kMaxLabelValueChars ||
+        std::any_of(value.begin(), value.end(),
+                    [](char c) { return static_cast<unsigned char>(c) < 0x20; })) {
+      return InvalidArgumentError("session.labels['" + key + "']: the value must be at most " +
+                                  std::to_string(kMaxLabelValueChars) +
+                                  " characters with no control characters");
+    }
+  }
+  return Status::Ok();
 }
 
 Status ValidatePipelineOptions(const v1::PipelineOptions& p) {
@@ -447,7 +477,10 @@ Status ValidatePipelineOptions(const v1::PipelineOptions& p) {
 }
 
 Status ValidateListRequest(const v1::ListSessionsRequest& r) {
-  if (r.page_size() < 0) return InvalidArgumentError("page_size must be >= 0 (0 = 50)");
+  if (r.page_size() < 0) {
+    return InvalidArgumentError("page_size must be >= 0 (0 = " +
+                                std::to_string(kDefaultListPageSize) + ")");
+  }
   if (!v1::Session::State_IsValid(r.state_filter())) {
     return InvalidArgumentError("state_filter " + std::to_string(r.state_filter()) +
                                 " is not one of " + EnumValues(v1::Session::State_descriptor()));

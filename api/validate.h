@@ -49,6 +49,13 @@ Status ValidateSdp(const std::string& sdp);
 constexpr int kMaxAllowedSenders = 64;
 Status ValidateAllowedSenders(const v1::RtpSdp& rtp);
 Status ValidatePipelineOptions(const v1::PipelineOptions& options);
+// Session.labels: at most kMaxLabels; keys 1 to kMaxLabelKeyChars of
+// [a-z0-9_.-] starting with a letter; values at most kMaxLabelValueChars,
+// no control characters.
+constexpr size_t kMaxLabels = 64;
+constexpr size_t kMaxLabelKeyChars = 63;
+constexpr size_t kMaxLabelValueChars = 256;
+Status ValidateLabels(const google::protobuf::Map<std::string, std::string>& labels);
 // ListSessionsRequest: page_size >= 0 and state_filter one of Session.State.
 Status ValidateListRequest(const v1::ListSessionsRequest& request);
 

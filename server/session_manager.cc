@@ -12,6 +12,7 @@
 #include <cstdlib>
 #include <random>
 
+#include "api/list_query.h"
 #include "api/validate.h"
 #include "server/ingest_source.h"
 #include "server/session_runner.h"
@@ -170,6 +171,7 @@ StatusOr<v1::Session> SessionManager::Create(const v1::Session& request) {
     proto.clear_stats();
     proto.clear_error();
     proto.clear_ingest_url();
+    proto.clear_codec();
     if (request.has_rtsp_push()) {
       auto url = RtspPushIngestUrl(options_.rtsp_push_host, request.rtsp_push().path());
       if (!url.ok()) return url.status();
@@ -214,40 +216,20 @@ StatusOr<v1::Session> SessionManager::Get(const std::string& name) const {
 
 StatusOr<v1::ListSessionsResponse> SessionManager::List(const v1::ListSessionsRequest& request,
                                                         const std::string* tenant) const {
-  SLAPSE_RETURN_IF_ERROR(api::ValidateListRequest(request));
-  const size_t page_size =
-      request.page_size() == 0 ? 50 : std::min<size_t>(request.page_size(), 1000);
-  int64_t after = 0;
-  if (!request.page_token().empty()) {
-    char* end = nullptr;
-    after = std::strtoll(request.page_token().c_str(), &end, 10);
-    if (end == nullptr || *end != '\0') return InvalidArgumentError("bad page_token");
-  }
-  std::vector<std::shared_ptr<Session>> candidates;
+  std::vector<std::shared_ptr<Session>> all;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    for (auto it = sessions_.upper_bound(after); it != sessions_.end(); ++it) {
-      candidates.push_back(it->second);
-    }
+    for (const auto& [id, s] : sessions_) all.push_back(s);
   }
-  v1::ListSessionsResponse out;
-  int64_t last_ordinal = 0;
-  for (size_t i = 0; i < candidates.size(); ++i) {
-    v1::Session snap = candidates[i]->Snapshot();
-    if (request.state_filter() != v1::Session::STATE_UNSPECIFIED &&
-        snap.state() != request.state_filter()) {
-      continue;
-    }
+  // The caller's sessions; the query (filter, order, page) is api/list_query.h's.
+  std::vector<v1::Session> snapshots;
+  snapshots.reserve(all.size());
+  for (const auto& s : all) {
+    v1::Session snap = s->Snapshot();
     if (tenant != nullptr && snap.tenant() != *tenant) continue;
-    if (static_cast<size_t>(out.sessions_size()) == page_size) {
-      // More follow: the token is the ordinal of the last session returned.
-      out.set_next_page_token(std::to_string(last_ordinal));
-      break;
-    }
-    *out.add_sessions() = std::move(snap);
-    last_ordinal = candidates[i]->ordinal;
+    snapshots.push_back(std::move(snap));
   }
-  return out;
+  return api::ApplyListQuery(std::move(snapshots), request);
 }
 
 StatusOr<v1::Session> SessionManager::Stop(const std::string& name) {

@@ -85,7 +85,7 @@ class SessionManager {
   // or UNAVAILABLE (shutting down, or no free port for an RTSP listener).
   StatusOr<v1::Session> Create(const v1::Session& request);
   StatusOr<v1::Session> Get(const std::string& name) const;
-  // Sessions in creation order from `page_token`; see ListSessionsRequest.
+  // One page of the query (filter, order_by, page; api/list_query.h).
   // With `tenant`, only that tenant's sessions (Session.tenant); null = all.
   StatusOr<v1::ListSessionsResponse> List(const v1::ListSessionsRequest& request,
                                           const std::string* tenant = nullptr) const;

@@ -181,6 +181,7 @@ bool SessionRunner::MakePipeline(const StreamInfo& info) {
     }
     k = api::IntrinsicsFromProto(pk);
     options = api::PipelineOptionsFromProto(session_->proto.pipeline_options());
+    session_->proto.set_codec(info.codec_name);
   }
   // The stream's size when it knows it, else the intrinsics' own (if given).
   if (info.width_px > 0 && info.height_px > 0) {

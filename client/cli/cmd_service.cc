@@ -7,12 +7,15 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <map>
 #include <memory>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "api/convert.h"
+#include "api/list_query.h"
+#include "api/validate.h"
 #include "client/cli/commands.h"
 #include "client/cli/flags.h"
 #include "client/lib/client.h"
@@ -78,6 +81,13 @@ void PrintSessionLine(const v1::Session& s) {
               static_cast<long long>(s.stats().tracked_pairs()), s.stats().planes(),
               s.stats().fps(),
               s.error().message().empty() ? "" : "  error: ", s.error().message().c_str());
+  if (!s.labels().empty() || !s.codec().empty()) {
+    // Labels in key order, so the line is stable.
+    std::map<std::string, std::string> sorted(s.labels().begin(), s.labels().end());
+    std::string line = s.codec().empty() ? "" : "codec " + s.codec();
+    for (const auto& [k, v] : sorted) line += (line.empty() ? "" : "  ") + k + "=" + v;
+    std::printf("%-14s %s\n", "", line.c_str());
+  }
   // A finished session without poses says why.
   if (s.state() == v1::Session::FINISHED && !s.state_message().empty()) {
     std::printf("%-14s %s\n", "", s.state_message().c_str());
@@ -392,9 +402,22 @@ int RunCreate(int argc, char** argv) {
       ->capture_default_str();
   ScaleFlags scale_flags;
   scale_flags.AddTo(&cl);
+  std::vector<std::string> labels;
+  app.add_option("--label", labels, "a fleet label KEY=VALUE (repeatable), e.g. site=depot")
+      ->type_name("KEY=VALUE");
   if (int rc = ParseOrExit(cl, argc, argv, 0); rc >= 0) return rc;
   v1::Session request;
   if (Status s = SetSource(cl, source, &request); !s.ok()) return Fail("create", s.message(), 2);
+  for (const std::string& label : labels) {
+    const size_t eq = label.find('=');
+    if (eq == std::string::npos || eq == 0) {
+      return Fail("create", "--label wants KEY=VALUE, got '" + label + "'", 2);
+    }
+    (*request.mutable_labels())[label.substr(0, eq)] = label.substr(eq + 1);
+  }
+  if (Status s = api::ValidateLabels(request.labels()); !s.ok()) {
+    return Fail("create", s.message(), 2);
+  }
   StatusOr<Intrinsics> k = SessionIntrinsics(intrinsics_spec);
   if (!k.ok()) return Fail("create", k.status().message(), 2);
   *request.mutable_intrinsics() = api::IntrinsicsToProto(*k);
@@ -513,23 +536,41 @@ int RunWatch(int argc, char** argv) {
 int RunList(int argc, char** argv) {
   CommandLine cl("list", "[options]");
   std::string server, state_name;
+  v1::ListSessionsRequest request;
   AddServerFlag(&cl, &server);
   cl.app()
       .add_option("--state", state_name, "only CREATED, RUNNING, FINISHED, FAILED or STOPPED")
       ->type_name("STATE");
+  cl.app()
+      .add_option("--filter", *request.mutable_filter(),
+                  "AIP-160 filter, e.g. 'state=RUNNING AND labels.site=depot' "
+                  "(fields: api/list_query.h)")
+      ->type_name("EXPR");
+  cl.app()
+      .add_option("--order-by", *request.mutable_order_by(),
+                  "e.g. 'stats.lag_ms desc, name' (default: create_time, name)")
+      ->type_name("ORDER");
   if (int rc = ParseOrExit(cl, argc, argv, 0); rc >= 0) return rc;
   v1::Session::State state = v1::Session::STATE_UNSPECIFIED;
   if (cl.Has("state") && !v1::Session::State_Parse(state_name, &state)) {
     return Fail("list", "unknown --state '" + state_name + "'", 2);
   }
+  request.set_state_filter(state);
+  // The same parser as the server's: a bad expression is a usage error here.
+  if (auto f = api::SessionFilter::Parse(request.filter()); !f.ok()) {
+    return Fail("list", f.status().message(), 2);
+  }
+  if (auto o = api::SessionOrder::Parse(request.order_by()); !o.ok()) {
+    return Fail("list", o.status().message(), 2);
+  }
   auto c = Connect(server);
-  std::string token;
+  request.set_page_size(100);
   do {
-    auto page = c->ListSessions(100, token, state);
+    auto page = c->ListSessions(request);
     if (!page.ok()) return Fail("list", page.status().ToString());
     for (const v1::Session& s : page->sessions()) PrintSessionLine(s);
-    token = page->next_page_token();
-  } while (!token.empty());
+    request.set_page_token(page->next_page_token());
+  } while (!request.page_token().empty());
   return 0;
 }
 

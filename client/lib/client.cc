@@ -116,6 +116,11 @@ StatusOr<v1::ListSessionsResponse> SlapseClient::ListSessions(int page_size,
   request.set_page_size(page_size);
   request.set_page_token(page_token);
   request.set_state_filter(state);
+  return ListSessions(request);
+}
+
+StatusOr<v1::ListSessionsResponse> SlapseClient::ListSessions(
+    const v1::ListSessionsRequest& request) {
   return Unary<v1::ListSessionsRequest, v1::ListSessionsResponse>(
       &v1::SlapseService::StubInterface::ListSessions, request);
 }

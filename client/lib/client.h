@@ -68,6 +68,8 @@ class SlapseClient {
   // One page; state = STATE_UNSPECIFIED for all.
   StatusOr<v1::ListSessionsResponse> ListSessions(int page_size, const std::string& page_token,
                                                   v1::Session::State state);
+  // One page of a query with filter / order_by (api/list_query.h).
+  StatusOr<v1::ListSessionsResponse> ListSessions(const v1::ListSessionsRequest& request);
   Status DeleteSession(const std::string& name);
   StatusOr<v1::Session> StopSession(const std::string& name);
   // The whole snapshot, fetched page by page (any session length).
