@@ -58,6 +58,7 @@ StatusOr<v1::Session> SessionManager::Create(const v1::Session& request) {
     s->proto.clear_stats();
     s->proto.clear_error();
     s->proto.clear_ingest_url();
+    s->proto.clear_stream_report();
     if (request.has_rtsp_push()) {
       auto url = RtspPushIngestUrl(options_.rtsp_push_host, request.rtsp_push().path());
       if (!url.ok()) return url.status();

@@ -284,6 +284,11 @@ int RunCreate(int argc, char** argv) {
       ->capture_default_str();
   ScaleFlags scale_flags;
   scale_flags.AddTo(&cl);
+  MvReaderOptions stream_options;
+  bool no_reencode = !stream_options.reencode;
+  app.add_flag("--no-reencode", no_reencode,
+               "FAIL a stream whose codec has no motion vectors (HEVC, VP9, AV1, MJPEG, ...) "
+               "instead of re-encoding it in-process");
   if (int rc = ParseOrExit(cl, argc, argv, 0); rc >= 0) return rc;
   v1::Session request;
   if (Status s = SetSource(cl, source, &request); !s.ok()) return Fail("create", s.message(), 2);
@@ -301,6 +306,8 @@ int RunCreate(int argc, char** argv) {
   options.extraction.eps_h_px = eps_h_px;
   options.scale = *scale;
   *request.mutable_pipeline_options() = api::PipelineOptionsToProto(options);
+  stream_options.reencode = !no_reencode;
+  *request.mutable_stream_options() = api::StreamOptionsToProto(stream_options);
   auto session = Connect(server)->CreateSession(request);
   if (!session.ok()) return Fail("create", session.status().ToString());
   std::printf("%s\n", session->name().c_str());
