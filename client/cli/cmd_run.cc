@@ -3,6 +3,7 @@
 // --gt (a simulated drive's directory) the errors against the ground truth.
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
