@@ -119,6 +119,31 @@ PipelineOptions PipelineOptionsFromProto(const v1::PipelineOptions& p) {
   return o;
 }
 
+v1::StreamOptions StreamOptionsToProto(const MvReaderOptions& options) {
+  v1::StreamOptions p;
+  p.set_reencode(options.reencode);
+  return p;
+}
+
+MvReaderOptions StreamOptionsFromProto(const v1::StreamOptions& p) {
+  MvReaderOptions o;
+  if (p.has_reencode()) o.reencode = p.reencode();
+  return o;
+}
+
+v1::StreamReport StreamReportToProto(const StreamInfo& info, const ReadStats& stats) {
+  v1::StreamReport p;
+  const bool reencoded = !info.reencoded_from.empty();
+  p.set_codec(reencoded ? info.reencoded_from : info.codec_name);
+  p.set_reencoded(reencoded);
+  if (reencoded) p.set_reencoded_to(info.codec_name);
+  p.set_decode_cpu_s(stats.decode_cpu_s);
+  p.set_reencode_cpu_s(stats.reencode_cpu_s);
+  p.set_frames(stats.frames);
+  for (const std::string& note : stats.notes) p.add_notes(note);
+  return p;
+}
+
 v1::Trajectory::Point TimedPoseToProto(const TimedPose& point) {
   v1::Trajectory::Point out;
   out.set_anchor_index(point.index);

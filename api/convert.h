@@ -16,6 +16,7 @@
 #include "core/common/camera.h"
 #include "core/common/rigid3.h"
 #include "core/common/timed_pose.h"
+#include "core/mv/mv_reader.h"
 #include "core/pipeline/pipeline.h"
 #include "slapse/v1/slapse.pb.h"
 
@@ -36,6 +37,14 @@ v1::PipelineOptions PipelineOptionsToProto(const PipelineOptions& options);
 PipelineOptions PipelineOptionsFromProto(const v1::PipelineOptions& options);
 v1::PipelineOptions::ScaleSource ScaleSourceToProto(ScaleOptions::Source source);
 ScaleOptions::Source ScaleSourceFromProto(v1::PipelineOptions::ScaleSource source);
+
+// Stream options: whether to re-encode codecs without vectors (unset: the
+// MvReaderOptions default). Only `reencode` travels; the rest keeps
+// MvReaderOptions{}'s values.
+v1::StreamOptions StreamOptionsToProto(const MvReaderOptions& options);
+MvReaderOptions StreamOptionsFromProto(const v1::StreamOptions& options);
+// What a reader knows about its stream, as Session.stream_report.
+v1::StreamReport StreamReportToProto(const StreamInfo& info, const ReadStats& stats);
 
 // Trajectory: one point, and a GetTrajectory snapshot as
 // Pipeline::trajectory() holds it.

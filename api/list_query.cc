@@ -298,7 +298,7 @@ bool Eval(const Node& n, const v1::Session& s) {
       text = s.name();
       break;
     case Field::kCodec:
-      text = s.codec();
+      text = s.stream_report().codec();
       break;
     case Field::kSource:
       text = SourceName(s);
@@ -526,7 +526,7 @@ int CompareBy(const FieldRef& ref, const v1::Session& a, const v1::Session& b) {
     case Field::kName:
       return three(a.name(), b.name());
     case Field::kCodec:
-      return three(a.codec(), b.codec());
+      return three(a.stream_report().codec(), b.stream_report().codec());
     case Field::kSource:
       return three(SourceName(a), SourceName(b));
     case Field::kState:

@@ -11,7 +11,9 @@
 //   simple     := "(" expression ")" | field comparator value | "labels" ":" key
 //   comparator := "=" | "!=" | "<" | "<=" | ">" | ">=" | ":"
 // Fields and what they take:
-//   name, codec                   text; "=", "!=", ":" with an optional '*' at
+//   name, codec                   text (codec: Session.stream_report.codec, the
+//                                 stream's own codec, also when re-encoded);
+//                                 "=", "!=", ":" with an optional '*' at
 //                                 either end as a wildcard ("h26*")
 //   state                         a Session.State name: "=", "!="
 //   source                        upload | rtsp_pull | rtsp_push | rtp_sdp: "=", "!="

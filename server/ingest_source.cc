@@ -1,5 +1,6 @@
 #include "server/ingest_source.h"
 
+#include "api/convert.h"
 #include "api/validate.h"
 
 namespace slapse::server {
@@ -11,16 +12,23 @@ IngestSource::IngestSource(int start_timeout_ms, int receive_timeout_ms)
 
 std::unique_ptr<IngestSource> IngestSource::Make(const v1::Session& request,
                                                  std::shared_ptr<UploadQueue> upload) {
+  std::unique_ptr<IngestSource> source;
   switch (request.source_case()) {
     case v1::Session::kRtspPull:
-      return MakeRtspPullSource(request.rtsp_pull());
+      source = MakeRtspPullSource(request.rtsp_pull());
+      break;
     case v1::Session::kRtspPush:
-      return MakeRtspPushSource(request.rtsp_push(), request.ingest_url());
+      source = MakeRtspPushSource(request.rtsp_push(), request.ingest_url());
+      break;
     case v1::Session::kRtpSdp:
-      return MakeRtpSdpSource(request.rtp_sdp());
+      source = MakeRtpSdpSource(request.rtp_sdp());
+      break;
     default:
-      return MakeUploadSource(std::move(upload));
+      source = MakeUploadSource(std::move(upload));
+      break;
   }
+  source->reader_options_ = api::StreamOptionsFromProto(request.stream_options());
+  return source;
 }
 
 std::optional<int> SingleConnectionSource::AfterConnection(Session* session,

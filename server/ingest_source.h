@@ -64,10 +64,18 @@ class IngestSource {
  protected:
   // 0 = the defaults (api/validate.h).
   IngestSource(int start_timeout_ms, int receive_timeout_ms);
+  // The session's stream options (Session.stream_options, e.g. re-encoding);
+  // each source adds its format and interrupt to these.
+  MvReaderOptions ReaderOptions(std::function<bool()> interrupt) const {
+    MvReaderOptions o = reader_options_;
+    o.interrupt = std::move(interrupt);
+    return o;
+  }
 
  private:
   int start_timeout_ms_;
   int receive_timeout_ms_;
+  MvReaderOptions reader_options_;
 };
 
 // The one-connection sources (upload, RTSP push, RTP/SDP): a connection's end

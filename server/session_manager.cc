@@ -171,7 +171,7 @@ StatusOr<v1::Session> SessionManager::Create(const v1::Session& request) {
     proto.clear_stats();
     proto.clear_error();
     proto.clear_ingest_url();
-    proto.clear_codec();
+    proto.clear_stream_report();
     if (request.has_rtsp_push()) {
       auto url = RtspPushIngestUrl(options_.rtsp_push_host, request.rtsp_push().path());
       if (!url.ok()) return url.status();

@@ -103,12 +103,14 @@ void SessionRunner::Run() {
 
 bool SessionRunner::RunConnection(MvReader* reader, ConnectionEnd* end) {
   if (!StartConnection(reader->info())) return false;
+  notes_reported_ = 0;
   FrameRecord frame;
   for (;;) {
     if (end->frames > 0) SetDeadline(source_->receive_timeout_ms());
     StageTimer read_timer(Stage::kRead);
     end->status = reader->Next(&frame);
     read_timer.Done();
+    ReportStream(*reader, !end->status.ok());
     if (!end->status.ok()) return true;
     ++end->frames;
     ++frames_;
@@ -118,6 +120,26 @@ bool SessionRunner::RunConnection(MvReader* reader, ConnectionEnd* end) {
       session_->Transition(v1::Session::RUNNING, Status::Ok(), "receiving the stream");
     }
     if (!Feed(frame)) return false;
+  }
+}
+
+// Session.stream_report from the reader: on the first frame, on a new note
+// (a resolution change, also said as a RUNNING state message), every 30
+// frames and at the connection's end.
+void SessionRunner::ReportStream(const MvReader& reader, bool at_end) {
+  const ReadStats& stats = reader.stats();
+  const bool new_notes = stats.notes.size() != notes_reported_;
+  if (!at_end && !new_notes && stats.frames % 30 != 1) return;
+  std::lock_guard<std::mutex> lock(session_->mu);
+  *session_->proto.mutable_stream_report() = api::StreamReportToProto(reader.info(), stats);
+  for (; notes_reported_ < stats.notes.size(); ++notes_reported_) {
+    // Said as a StateChange event in the current state (Transition skips a same-state change).
+    if (IsTerminal(session_->proto.state())) continue;
+    session_->proto.set_state_message(stats.notes[notes_reported_]);
+    v1::SessionEvent e;
+    e.mutable_state_change()->set_state(session_->proto.state());
+    e.mutable_state_change()->set_message(stats.notes[notes_reported_]);
+    session_->events->Append(std::move(e));
   }
 }
 
@@ -181,7 +203,6 @@ bool SessionRunner::MakePipeline(const StreamInfo& info) {
     }
     k = api::IntrinsicsFromProto(pk);
     options = api::PipelineOptionsFromProto(session_->proto.pipeline_options());
-    session_->proto.set_codec(info.codec_name);
   }
   // The stream's size when it knows it, else the intrinsics' own (if given).
   if (info.width_px > 0 && info.height_px > 0) {

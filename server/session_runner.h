@@ -42,6 +42,7 @@ class SessionRunner {
   // Reads connection `reader` to its end into `end`; false if the session
   // ended inside it.
   bool RunConnection(MvReader* reader, ConnectionEnd* end);
+  void ReportStream(const MvReader& reader, bool at_end);
   // First connection: makes the pipeline; later ones: checks the stream is
   // the same and breaks the pipeline. Then continues the timeline. False if
   // the session ended.
@@ -73,6 +74,7 @@ class SessionRunner {
   Clock::time_point start_;                                  // when the pipeline was made
   std::map<int64_t, google::protobuf::Timestamp> received_;  // frame index -> when read
   int64_t frames_ = 0;                                       // over the session's life
+  size_t notes_reported_ = 0;  // the connection's reader notes already in stream_report
   int64_t pairs_ = 0, tracked_ = 0;
   int64_t index_offset_ = 0;       // added to a connection's frame indices
   double time_offset_s_ = 0.0;     // and to its timestamps

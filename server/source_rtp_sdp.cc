@@ -102,8 +102,7 @@ class RtpSdpSource : public SingleConnectionSource {
       unlink(path.c_str());
       return UnavailableError("cannot write the SDP to a temp file");
     }
-    MvReaderOptions o;
-    o.interrupt = std::move(interrupt);
+    MvReaderOptions o = ReaderOptions(std::move(interrupt));
     o.format = "sdp";
     o.format_options = {{"protocol_whitelist", "file,udp,rtp"}, {"allowed_media_types", "video"}};
     auto reader = MvReader::Open(path, o);

@@ -57,8 +57,7 @@ class RtspPullSource : public IngestSource {
 StatusOr<std::unique_ptr<MvReader>> RtspPullSource::Open(std::function<bool()> interrupt) {
   // "timeout" is FFmpeg's socket I/O timeout (connect and reads) in
   // microseconds; the interrupt callback bounds the rest.
-  MvReaderOptions o;
-  o.interrupt = std::move(interrupt);
+  MvReaderOptions o = ReaderOptions(std::move(interrupt));
   o.format = "rtsp";
   o.format_options = {{"rtsp_transport", "tcp"},
                       {"allowed_media_types", "video"},

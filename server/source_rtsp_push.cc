@@ -22,8 +22,7 @@ class RtspPushSource : public SingleConnectionSource {
 
   StatusOr<std::unique_ptr<MvReader>> Open(std::function<bool()> interrupt) override {
     // "timeout" is FFmpeg's socket I/O timeout in microseconds.
-    MvReaderOptions o;
-    o.interrupt = std::move(interrupt);
+    MvReaderOptions o = ReaderOptions(std::move(interrupt));
     o.format = "rtsp";
     o.format_options = {{"rtsp_flags", "listen"},
                         {"timeout", std::to_string(int64_t{receive_timeout_ms()} * 1000)}};

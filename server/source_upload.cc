@@ -15,8 +15,7 @@ class UploadSource : public SingleConnectionSource {
   bool network() const override { return false; }
 
   StatusOr<std::unique_ptr<MvReader>> Open(std::function<bool()> interrupt) override {
-    MvReaderOptions o;
-    o.interrupt = std::move(interrupt);
+    MvReaderOptions o = ReaderOptions(std::move(interrupt));
     return MvReader::Open(std::make_unique<UploadByteSource>(upload_), o);
   }
 

@@ -113,6 +113,48 @@ TEST(PipelineOptionsRoundTrip, OnlyTheSourcesParameterTravels) {
   EXPECT_EQ(o.scale.camera_height_m, ScaleOptions{}.camera_height_m);
 }
 
+// Stream options: `reencode` travels both ways; unset takes MvReaderOptions'
+// default (on); the CLI's --no-reencode sets it false through the same struct.
+TEST(StreamOptionsRoundTrip, Reencode) {
+  for (const bool reencode : {true, false}) {
+    MvReaderOptions o;
+    o.reencode = reencode;
+    const v1::StreamOptions proto = api::StreamOptionsToProto(o);
+    EXPECT_TRUE(proto.has_reencode());
+    EXPECT_EQ(proto.reencode(), reencode);
+    EXPECT_EQ(api::StreamOptionsFromProto(proto).reencode, reencode);
+    EXPECT_TRUE(MessageDifferencer::Equals(
+        api::StreamOptionsToProto(api::StreamOptionsFromProto(proto)), proto));
+  }
+  EXPECT_EQ(api::StreamOptionsFromProto(v1::StreamOptions{}).reencode, MvReaderOptions{}.reencode);
+  EXPECT_TRUE(MvReaderOptions{}.reencode) << "re-encoding is on by default (issue 13)";
+}
+
+TEST(StreamReportTest, SaysReencodedFromAndCarriesCostAndNotes) {
+  StreamInfo info;
+  info.codec_name = kReencodeCodec;
+  info.reencoded_from = "hevc";
+  ReadStats stats;
+  stats.frames = 10;
+  stats.decode_cpu_s = 0.25;
+  stats.reencode_cpu_s = 0.5;
+  stats.notes = {"frame 3: the stream's size changed"};
+  const v1::StreamReport r = api::StreamReportToProto(info, stats);
+  EXPECT_EQ(r.codec(), "hevc");
+  EXPECT_TRUE(r.reencoded());
+  EXPECT_EQ(r.reencoded_to(), kReencodeCodec);
+  EXPECT_EQ(r.decode_cpu_s(), 0.25);
+  EXPECT_EQ(r.reencode_cpu_s(), 0.5);
+  EXPECT_EQ(r.frames(), 10);
+  ASSERT_EQ(r.notes_size(), 1);
+  info.codec_name = "h264";
+  info.reencoded_from.clear();
+  const v1::StreamReport direct = api::StreamReportToProto(info, stats);
+  EXPECT_EQ(direct.codec(), "h264");
+  EXPECT_FALSE(direct.reencoded());
+  EXPECT_TRUE(direct.reencoded_to().empty());
+}
+
 TEST(ConvertTest, IntrinsicsRoundTrip) {
   Intrinsics k;
   k.fx_px = 512.25;

@@ -79,7 +79,7 @@ TEST_F(FleetQueryTest, LabelsCodecFilterAndOrderReachTheServer) {
   ASSERT_TRUE(depot.ok()) << depot.status().ToString();
   ASSERT_TRUE(harbour.ok()) << harbour.status().ToString();
   EXPECT_EQ(depot->labels().at("camera"), "gate-1");
-  EXPECT_TRUE(depot->codec().empty());  // no stream yet
+  EXPECT_TRUE(depot->stream_report().codec().empty());  // no stream yet
 
   // The depot camera streams; its codec appears once the stream opens.
   auto uploaded = client_->UploadFile(depot->name(), drive_.video_path);
@@ -90,7 +90,7 @@ TEST_F(FleetQueryTest, LabelsCodecFilterAndOrderReachTheServer) {
   auto got = client_->GetSession(depot->name());
   ASSERT_TRUE(got.ok());
   EXPECT_EQ(got->state(), v1::Session::FINISHED) << got->state_message();
-  EXPECT_EQ(got->codec(), "mpeg2video");
+  EXPECT_EQ(got->stream_report().codec(), "mpeg2video");
   EXPECT_EQ(got->labels().at("site"), "depot");
 
   EXPECT_EQ(Names("labels.site=depot"), std::set<std::string>{depot->name()});

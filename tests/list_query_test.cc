@@ -24,7 +24,7 @@ v1::Session MakeSession(const std::string& name, v1::Session::State state, const
   v1::Session s;
   s.set_name(name);
   s.set_state(state);
-  s.set_codec(codec);
+  s.mutable_stream_report()->set_codec(codec);
   *s.mutable_create_time() = TimeUtil::SecondsToTimestamp(create_s);
   *s.mutable_update_time() = TimeUtil::SecondsToTimestamp(create_s + 10);
   s.mutable_stats()->set_lag_ms(lag_ms);

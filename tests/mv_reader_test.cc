@@ -264,14 +264,27 @@ std::string EncodeWithCli(const std::string& codec_args, const std::string& name
 
 class NoMvCodecTest : public ::testing::TestWithParam<std::pair<const char*, const char*>> {};
 
-TEST_P(NoMvCodecTest, IsRefusedUpFrontNamingTheCodec) {
+// With re-encoding off (MvReaderOptions::reencode = false) a codec without
+// vectors is refused up front; by default it is re-encoded (every frame comes
+// out; vectors checked in codec_test.cc).
+TEST_P(NoMvCodecTest, IsReencodedByDefaultAndRefusedUpFrontWhenOff) {
   const auto& [args, name] = GetParam();
   const std::string path = EncodeWithCli(args, name);
-  auto reader = MvReader::Open(path);
+  const std::string expected_codec = std::string(name).substr(0, std::string(name).find('.'));
+  {
+    auto reencoded = MvReader::Open(path);
+    ASSERT_TRUE(reencoded.ok()) << reencoded.status().ToString();
+    EXPECT_EQ((*reencoded)->info().reencoded_from, expected_codec);
+    Status end;
+    EXPECT_EQ(ReadAll(reencoded->get(), &end).size(), 5u);
+    EXPECT_EQ(end.code(), StatusCode::kOutOfRange) << end.ToString();
+  }
+  MvReaderOptions off;
+  off.reencode = false;
+  auto reader = MvReader::Open(path, off);
   ASSERT_FALSE(reader.ok());
   EXPECT_EQ(reader.status().code(), StatusCode::kFailedPrecondition);
   const std::string& msg = reader.status().message();
-  const std::string expected_codec = std::string(name).substr(0, std::string(name).find('.'));
   EXPECT_NE(msg.find("'" + expected_codec + "'"), std::string::npos) << msg;
   EXPECT_NE(msg.find("H.264"), std::string::npos) << "says what to do: " << msg;
 }

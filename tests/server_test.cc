@@ -375,6 +375,8 @@ TEST_F(ServerTest, BadIntrinsicsAreInvalidArgument) {
   EXPECT_EQ(created.status().code(), StatusCode::kInvalidArgument);
 }
 
+// With re-encoding refused (StreamOptions.reencode = false, `create
+// --no-reencode`), a codec without vectors FAILs the session.
 TEST_F(ServerTest, HevcUploadFailsWithFailedPreconditionAndServerKeepsServing) {
   const std::string hevc = *dir_ + "/x.mkv";
   ASSERT_EQ(testing::RunCommand("ffmpeg -nostdin -loglevel error -y -f lavfi -i "
@@ -382,7 +384,9 @@ TEST_F(ServerTest, HevcUploadFailsWithFailedPreconditionAndServerKeepsServing) {
                                 "-x265-params log-level=error " +
                                 hevc),
             0);
-  auto created = client_->CreateSession(UploadRequest());
+  v1::Session refusing = UploadRequest();
+  refusing.mutable_stream_options()->set_reencode(false);
+  auto created = client_->CreateSession(refusing);
   ASSERT_TRUE(created.ok()) << created.status().ToString();
   auto uploaded = client_->UploadBytes(created->name(), testing::ReadFileBytes(hevc));
   // The upload either completes before the session fails or reports its error.
@@ -409,6 +413,34 @@ TEST_F(ServerTest, HevcUploadFailsWithFailedPreconditionAndServerKeepsServing) {
   auto done = client_->GetSession(next->name());
   ASSERT_TRUE(done.ok());
   EXPECT_EQ(done->state(), v1::Session::FINISHED);
+}
+
+// By default a codec without vectors is re-encoded in-process (issue 13): the
+// drive as HEVC (ffmpeg's libx265, the camera) tracks to FINISHED, and the
+// session says "re-encoded from hevc" with its cost.
+TEST_F(ServerTest, HevcUploadIsReencodedAndTracks) {
+  const std::string hevc = *dir_ + "/drive_hevc.ts";
+  ASSERT_EQ(testing::RunCommand("ffmpeg -nostdin -loglevel error -y -i " + *drive_path_ +
+                                " -c:v libx265 -x265-params log-level=error:keyint=30 " + hevc),
+            0);
+  auto created = client_->CreateSession(UploadRequest());
+  ASSERT_TRUE(created.ok()) << created.status().ToString();
+  ASSERT_TRUE(client_->UploadBytes(created->name(), testing::ReadFileBytes(hevc)).ok());
+  Status end;
+  std::vector<v1::SessionEvent> events = WatchAll(created->name(), 0, &end);
+  ASSERT_TRUE(end.ok()) << end.ToString();
+  EXPECT_GT(CountPoses(events), 5);
+  auto got = client_->GetSession(created->name());
+  ASSERT_TRUE(got.ok()) << got.status().ToString();
+  EXPECT_EQ(got->state(), v1::Session::FINISHED) << got->state_message();
+  const v1::StreamReport& r = got->stream_report();
+  EXPECT_EQ(r.codec(), "hevc");
+  EXPECT_TRUE(r.reencoded());
+  EXPECT_EQ(r.reencoded_to(), "mpeg2video");
+  EXPECT_EQ(r.frames(), 60);
+  EXPECT_GT(r.reencode_cpu_s(), 0.0);
+  EXPECT_GT(r.decode_cpu_s(), 0.0);
+  EXPECT_EQ(r.notes_size(), 0);
 }
 
 TEST_F(ServerTest, OverCapacityIsResourceExhausted) {

@@ -3,6 +3,7 @@
 // --gt (a simulated drive's directory) the errors against the ground truth.
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -143,6 +144,21 @@ void MapAndErrors(const Pipeline& pipeline, const std::optional<GroundTruth>& gt
   }
 }
 
+// The re-encoding (when the codec has no vectors) and its cost, and the
+// stream's changes (resolution changes).
+void PrintStreamReport(const StreamInfo& info, const ReadStats& stats) {
+  const double frames = std::max<double>(1.0, static_cast<double>(stats.frames));
+  if (!info.reencoded_from.empty()) {
+    std::printf(
+        "re-encoded from %s to %s for motion vectors: %.1f ms/frame CPU (decoding %s: %.1f "
+        "ms/frame, %.1fx that)\n",
+        info.reencoded_from.c_str(), info.codec_name.c_str(), 1e3 * stats.reencode_cpu_s / frames,
+        info.reencoded_from.c_str(), 1e3 * stats.decode_cpu_s / frames,
+        stats.decode_cpu_s > 0 ? stats.reencode_cpu_s / stats.decode_cpu_s : 0.0);
+  }
+  for (const std::string& note : stats.notes) std::printf("stream     %s\n", note.c_str());
+}
+
 }  // namespace
 
 int RunRun(int argc, char** argv) {
@@ -166,6 +182,11 @@ int RunRun(int argc, char** argv) {
       ->type_name("FILE");
   bool quiet = false;
   app.add_flag("--quiet", quiet, "no progress line");
+  MvReaderOptions ro;
+  bool no_reencode = !ro.reencode;
+  app.add_flag("--no-reencode", no_reencode,
+               "refuse a codec without motion vectors (HEVC, VP9, AV1, MJPEG, ...) instead of "
+               "re-encoding it in-process");
   if (int rc = cl.Parse(argc, argv); rc >= 0) return rc;
   if (cl.positional().size() != 1) return Fail("run", "expected one INPUT (see --help)", 2);
   const std::string input = cl.positional()[0];
@@ -182,7 +203,8 @@ int RunRun(int argc, char** argv) {
     if (!loaded.ok()) return Fail("run", "--gt: " + loaded.status().ToString(), 2);
     gt = std::move(*loaded);
   }
-  auto reader = MvReader::Open(input);
+  ro.reencode = !no_reencode;
+  auto reader = MvReader::Open(input, ro);
   if (!reader.ok()) return Fail("run", reader.status().ToString());
   const StreamInfo& info = (*reader)->info();
   auto intrinsics = IntrinsicsFor(intrinsics_spec, input, info.width_px, info.height_px);
@@ -200,6 +222,7 @@ int RunRun(int argc, char** argv) {
   std::vector<PlaneEstimate> plane_estimates;
   const bool progress = !quiet && isatty(STDERR_FILENO);
   int steps = 0, tracked = 0;
+  std::string last_note;  // why the last untracked step did not track
   FrameRecord frame;
   Status end;
   while ((end = (*reader)->Next(&frame)).ok()) {
@@ -212,6 +235,7 @@ int RunRun(int argc, char** argv) {
     }
     if (!step->has_value()) continue;
     const PipelineStep& s = **step;
+    if (!s.note.empty()) last_note = s.note;
     ++steps;
     tracked += s.tracking;
     if (steps_csv) WriteStepRow(steps_csv.get(), s, pipeline.trajectory());
@@ -226,10 +250,19 @@ int RunRun(int argc, char** argv) {
   if (Status s = WriteResults(pipeline, out_dir); !s.ok()) return Fail("run", s.ToString());
   std::printf("input      %s (%s, %dx%d, %lld frames)\n", input.c_str(), info.codec_name.c_str(),
               info.width_px, info.height_px, static_cast<long long>((*reader)->stats().frames));
+  PrintStreamReport(info, (*reader)->stats());
   std::printf("tracked    %d of %d anchor pairs, %zu poses, %zu planes in the map (%s)\n", tracked,
               steps, pipeline.trajectory().size(), pipeline.plane_map().size(),
               pipeline.metric() ? "metres" : "up to scale: first step = 1");
 
+  if (pipeline.trajectory().empty()) {
+    // Never a silent empty result: say why (a still camera, a stream too short or too small).
+    std::printf("no poses   %s\n",
+                steps == 0 ? "no anchor pair was closed (too few frames, or no two anchor frames)"
+                           : ("none of the anchor pairs tracked; the last: " +
+                              (last_note.empty() ? std::string("(no reason given)") : last_note))
+                                 .c_str());
+  }
   MapAndErrors(pipeline, gt, plane_estimates, out_dir);
   std::printf("wrote      %s/{trajectory_tum.txt, trajectory_kitti.txt, planes.json, map.png}\n",
               out_dir.c_str());

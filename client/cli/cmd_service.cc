@@ -81,10 +81,10 @@ void PrintSessionLine(const v1::Session& s) {
               static_cast<long long>(s.stats().tracked_pairs()), s.stats().planes(),
               s.stats().fps(),
               s.error().message().empty() ? "" : "  error: ", s.error().message().c_str());
-  if (!s.labels().empty() || !s.codec().empty()) {
+  if (!s.labels().empty() || !s.stream_report().codec().empty()) {
     // Labels in key order, so the line is stable.
     std::map<std::string, std::string> sorted(s.labels().begin(), s.labels().end());
-    std::string line = s.codec().empty() ? "" : "codec " + s.codec();
+    std::string line = s.stream_report().codec().empty() ? "" : "codec " + s.stream_report().codec();
     for (const auto& [k, v] : sorted) line += (line.empty() ? "" : "  ") + k + "=" + v;
     std::printf("%-14s %s\n", "", line.c_str());
   }
@@ -405,6 +405,11 @@ int RunCreate(int argc, char** argv) {
   std::vector<std::string> labels;
   app.add_option("--label", labels, "a fleet label KEY=VALUE (repeatable), e.g. site=depot")
       ->type_name("KEY=VALUE");
+  MvReaderOptions stream_options;
+  bool no_reencode = !stream_options.reencode;
+  app.add_flag("--no-reencode", no_reencode,
+               "FAIL a stream whose codec has no motion vectors (HEVC, VP9, AV1, MJPEG, ...) "
+               "instead of re-encoding it in-process");
   if (int rc = ParseOrExit(cl, argc, argv, 0); rc >= 0) return rc;
   v1::Session request;
   if (Status s = SetSource(cl, source, &request); !s.ok()) return Fail("create", s.message(), 2);
@@ -432,6 +437,8 @@ int RunCreate(int argc, char** argv) {
   options.extraction.eps_h_px = eps_h_px;
   options.scale = *scale;
   *request.mutable_pipeline_options() = api::PipelineOptionsToProto(options);
+  stream_options.reencode = !no_reencode;
+  *request.mutable_stream_options() = api::StreamOptionsToProto(stream_options);
   auto session = Connect(server)->CreateSession(request);
   if (!session.ok()) return Fail("create", session.status().ToString());
   std::printf("%s\n", session->name().c_str());

@@ -33,11 +33,18 @@ struct SimulateFlags {
   // so the defaults stay SimulateOptions{}'s exact values.
   double min_kmh = opt.min_speed_mps * 3.6, max_kmh = opt.max_speed_mps * 3.6;
   bool no_trees = false;
+  std::string preset;
 
   void AddTo(CLI::App& app) {
+    std::string names;
+    for (const std::string& n : EncoderPresetNames()) names += (names.empty() ? "" : ", ") + n;
+    app.add_option("--preset", preset,
+                   "camera-like encoder settings instead of --codec/--gop (" + names +
+                       "); --gop-size and --quality still override")
+        ->type_name("NAME");
     app.add_option("--out", opt.output_dir, "output directory (created)")->type_name("DIR");
     app.add_option("--seed", seed, "scene and path seed")->type_name("N")->capture_default_str();
-    app.add_option("--codec", codec_name, "mpeg2, mpeg4 or h264")
+    app.add_option("--codec", codec_name, "mpeg2, mpeg4, h264, hevc, vp9 or mjpeg")
         ->type_name("NAME")
         ->capture_default_str();
     app.add_option("--gop", gop, "IBBBP (n_B = 3), IBBP, IPPP ...")
@@ -99,6 +106,24 @@ Status SimulateFlags::Apply(const CommandLine& cl) {
   opt.seed = static_cast<uint64_t>(seed);
   opt.width_px = static_cast<int>(width);
   opt.height_px = static_cast<int>(height);
+  if (cl.Has("preset")) {
+    if (cl.Has("codec") || cl.Has("gop")) {
+      return InvalidArgumentError("--preset sets the codec and GOP: leave out --codec and --gop");
+    }
+    auto p = EncoderPreset(preset, opt.fps);
+    if (!p.ok()) return p.status();
+    opt.encoder = *p;
+    if (cl.Has("gop-size")) opt.encoder.gop_size = static_cast<int>(gop_size);
+    if (cl.Has("quality")) {
+      SLAPSE_RETURN_IF_ERROR(CheckRange("quality", quality, int64_t{0}, int64_t{51}));
+      opt.encoder.quality = static_cast<int>(quality);
+    }
+    // MPEG-TS carries no MJPEG.
+    if (opt.encoder.codec == VideoCodec::kMjpeg && !cl.Has("video-name")) {
+      opt.video_name = "drive.mkv";
+    }
+    return Status::Ok();
+  }
   opt.encoder.codec = *codec;
   opt.encoder.b_frames = *b_frames;
   opt.encoder.gop_size = static_cast<int>(gop_size);
@@ -125,7 +150,7 @@ int RunSimulate(int argc, char** argv) {
   if (!cl.Has("out")) return Fail("simulate", "--out DIR is required (see --help)", 2);
   if (Status s = flags.Apply(cl); !s.ok()) return Fail("simulate", s.message(), 2);
   const SimulateOptions& opt = flags.opt;
-  const std::string& gop = flags.gop;
+  const std::string& gop = cl.Has("preset") ? flags.preset : flags.gop;
 
   SimulateReport report;
   if (Status s = SimulateDrive(opt, &report); !s.ok()) return Fail("simulate", s.ToString());

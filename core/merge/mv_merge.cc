@@ -237,6 +237,57 @@ std::optional<AnchorPair> SegmentMerger::Chain(AnchorPair step) {
   return done;
 }
 
+std::vector<const MotionVector*> SegmentMerger::DirectVectors(const FrameRecord& later) const {
+  std::vector<const MotionVector*> past;
+  for (const MotionVector& mv : later.mvs) {
+    if (mv.direction == RefDirection::kPast) past.push_back(&mv);
+  }
+  if (later.reference_certain || options_.uncertain_refs == MergeOptions::UncertainRefs::kKeep) {
+    return past;
+  }
+  if (options_.uncertain_refs == MergeOptions::UncertainRefs::kDrop) return {};
+  // kConsistent: each vector against the component-wise median m of the
+  // vectors whose blocks lie in the 3x3 macroblocks around its own; kept if
+  //   |v - m| <= max(consistent_min_px, consistent_rel |m|).
+  // With locally constant motion a vector to the reference n frames back is
+  // about n m: |v - m| = (n - 1) |m| fails for n >= 2 once |m| exceeds
+  // consistent_min_px / (n - 1 - consistent_rel)... i.e. wherever the two
+  // references differ by more than the gate. (Its neighbours using the older
+  // reference too would pass: a whole region on one older reference is not
+  // detected; the pair's robust estimators see it as an outlier region.)
+  std::vector<std::vector<const MotionVector*>> by_cell(static_cast<size_t>(mb_cols_) * mb_rows_);
+  for (const MotionVector* mv : past) {
+    const int cell = CellOf(Eigen::Vector2d(mv->x_px, mv->y_px));
+    if (cell >= 0) by_cell[cell].push_back(mv);
+  }
+  std::vector<const MotionVector*> kept;
+  std::vector<double> xs, ys;
+  for (const MotionVector* mv : past) {
+    const MbCell c = MbCellOfPixel(Eigen::Vector2d(mv->x_px, mv->y_px));
+    xs.clear();
+    ys.clear();
+    for (int row = c.row - 1; row <= c.row + 1; ++row) {
+      for (int col = c.col - 1; col <= c.col + 1; ++col) {
+        if (row < 0 || col < 0 || row >= mb_rows_ || col >= mb_cols_) continue;
+        for (const MotionVector* n : by_cell[row * mb_cols_ + col]) {
+          xs.push_back(n->dx_px);
+          ys.push_back(n->dy_px);
+        }
+      }
+    }
+    if (xs.size() < 3) continue;  // too few neighbours to tell
+    std::nth_element(xs.begin(), xs.begin() + xs.size() / 2, xs.end());
+    std::nth_element(ys.begin(), ys.begin() + ys.size() / 2, ys.end());
+    const Eigen::Vector2d m(xs[xs.size() / 2], ys[ys.size() / 2]);
+    const Eigen::Vector2d v(mv->dx_px, mv->dy_px);
+    if ((v - m).norm() <=
+        std::max(options_.consistent_min_px, options_.consistent_rel * m.norm())) {
+      kept.push_back(mv);
+    }
+  }
+  return kept;
+}
+
 AnchorPair SegmentMerger::Build(const FrameRecord& later) const {
   AnchorPair pair;
   pair.earlier_index = earlier_->index;
@@ -255,12 +306,11 @@ AnchorPair SegmentMerger::Build(const FrameRecord& later) const {
   // Direct: the later P frame's past vectors refer to the earlier anchor.
   if (options_.use_direct && later.type == PictureType::kP &&
       later.prev_anchor_index == earlier_->index && !later.corrupt) {
-    for (const MotionVector& mv : later.mvs) {
-      if (mv.direction != RefDirection::kPast) continue;
-      const Eigen::Vector2d start(mv.x_px, mv.y_px);
+    for (const MotionVector* mv : DirectVectors(later)) {
+      const Eigen::Vector2d start(mv->x_px, mv->y_px);
       const int cell = CellOf(start);
       if (cell < 0) continue;
-      cells[cell].push_back({start, start + Eigen::Vector2d(mv.dx_px, mv.dy_px), true});
+      cells[cell].push_back({start, start + Eigen::Vector2d(mv->dx_px, mv->dy_px), true});
     }
   }
   // Indirect: B blocks with both a past (f) and a future (g) vector.

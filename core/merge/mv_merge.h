@@ -46,6 +46,19 @@ struct MergeOptions {
   // pair is emitted per chain. Segments with B frames are never chained.
   // 1 turns chaining off.
   int chain_min_frames = 4;
+  // Direct vectors of a P frame whose reference is not certain
+  // (FrameRecord::reference_certain false: several references allowed):
+  //  kKeep: used as if they referred to the previous anchor (mixes references);
+  //  kDrop: not used (only certain references);
+  //  kConsistent: kept where they agree with the frame's local field (the
+  //    median of the vectors in the 3x3 macroblocks around them) within
+  //    max(consistent_min_px, consistent_rel * |median|); a vector to an older
+  //    reference is about 2-3 times as long as its neighbours' (constant
+  //    motion) and fails (docs/METHOD.md "Reference handling").
+  enum class UncertainRefs { kKeep, kDrop, kConsistent };
+  UncertainRefs uncertain_refs = UncertainRefs::kConsistent;
+  double consistent_min_px = 1.0;
+  double consistent_rel = 0.33;
 };
 
 // One candidate correspondence of a cell.
@@ -106,6 +119,9 @@ class SegmentMerger {
  private:
   int CellOf(const Eigen::Vector2d& x_px) const;  // -1 outside the frame
   AnchorPair Build(const FrameRecord& later) const;
+  // The later P frame's past vectors to use as direct candidates (all of them
+  // when its reference is certain; else as MergeOptions::uncertain_refs says).
+  std::vector<const MotionVector*> DirectVectors(const FrameRecord& later) const;
   // Extends the chain by a one-segment P pair; returns the chained pair when
   // it is long enough.
   std::optional<AnchorPair> Chain(AnchorPair step);

@@ -48,6 +48,12 @@ struct FrameRecord {
   bool corrupt = false;
   // Position in decoding order (FFmpeg's coded_picture_number), -1 if unknown.
   int64_t coded_index = -1;
+  // False when the frame's vectors may use a reference other than the one
+  // prev_anchor_index / next_anchor_index name: an H.264 P frame of a stream
+  // whose SPS keeps more reference frames than its GOP needs
+  // (StreamInfo::extra_references()), a B frame of a B-pyramid. FFmpeg does not
+  // export a vector's reference index (docs/METHOD.md "Reference handling").
+  bool reference_certain = true;
   std::vector<MotionVector> mvs;
   // Decoded luma plane (width x height, row-major), only when
   // MvReaderOptions::keep_luma is set; empty otherwise.
@@ -58,6 +64,9 @@ struct FrameRecord {
 struct StreamInfo {
   std::string codec_name;   // FFmpeg decoder name, e.g. "mpeg2video", "h264"
   std::string format_name;  // demuxer, e.g. "mpegts"
+  // The input's codec when it was re-encoded for its vectors (codec_name is
+  // then the re-encoder's, kReencodeCodec); empty when read directly.
+  std::string reencoded_from;
   int width_px = 0, height_px = 0;
   double fps = 0.0;            // nominal frame rate, 0 if unknown
   int mv_precision_denom = 2;  // 2 = half-pel, 4 = quarter-pel
@@ -95,6 +104,13 @@ struct ReadStats {
   int64_t packet_errors = 0;   // packets the decoder rejected
   int64_t corrupt_frames = 0;  // frames decoded with concealed errors
   std::string first_error;     // human-readable description of the first error
+  // CPU seconds (the reading thread's clock): decoding the input, and
+  // re-encoding plus decoding the re-encoded frames (0 when not re-encoded).
+  double decode_cpu_s = 0.0;
+  double reencode_cpu_s = 0.0;
+  // Changes in the stream that change how it is read, in order, e.g. a
+  // resolution change whose vectors were rescaled. Never cleared.
+  std::vector<std::string> notes;
 };
 
 }  // namespace slapse

@@ -11,6 +11,7 @@ extern "C" {
 #include <libavformat/avformat.h>
 #include <libavutil/dict.h>
 #include <libavutil/motion_vector.h>
+#include <libswscale/swscale.h>
 }
 
 namespace slapse {
@@ -84,6 +85,7 @@ bool CodecExportsMotionVectors(const std::string& codec_name) {
 
 MvReader::~MvReader() {
   av_frame_free(&frame_);
+  av_frame_free(&reencoded_);
   av_packet_free(&pkt_);
   avcodec_free_context(&dec_);
   avformat_close_input(&fmt_);
@@ -166,13 +168,15 @@ StatusOr<std::unique_ptr<MvReader>> MvReader::OpenImpl(std::unique_ptr<MvReader>
   const AVCodecParameters* par = st->codecpar;
   const AVCodecDescriptor* desc = avcodec_descriptor_get(par->codec_id);
   const std::string codec_name = desc != nullptr ? desc->name : "unknown";
-  if (!CodecExportsMotionVectors(codec_name)) {
+  const bool reencode = !CodecExportsMotionVectors(codec_name);
+  if (reencode && !options.reencode) {
     return FailedPreconditionError(
         "video codec '" + codec_name + "' of '" + url +
-        "' does not export motion vectors in FFmpeg; slapse reads MPEG-1/2, MPEG-4 Part 2, "
-        "H.263 and H.264. Re-encode the stream (e.g. ffmpeg -i IN -c:v libx264 -bf 3 OUT.ts) "
-        "or configure the camera for H.264.");
+        "' does not export motion vectors in FFmpeg and re-encoding is off; slapse reads "
+        "MPEG-1/2, MPEG-4 Part 2, H.263 and H.264 directly and other codecs by re-encoding "
+        "them (turn re-encoding on, or configure the camera for H.264)");
   }
+  if (reencode) SLAPSE_RETURN_IF_ERROR(options.reencode_options.Check());
   const AVCodec* codec = avcodec_find_decoder(par->codec_id);
   if (codec == nullptr) {
     return FailedPreconditionError("this FFmpeg build has no decoder for '" + codec_name + "'");
@@ -183,7 +187,7 @@ StatusOr<std::unique_ptr<MvReader>> MvReader::OpenImpl(std::unique_ptr<MvReader>
   if (err < 0) return InternalError("bad codec parameters: " + AvErrorString(err));
   r->dec_->thread_count = std::max(1, options.decoder_threads);
   AVDictionary* dec_opts = nullptr;
-  av_dict_set(&dec_opts, "flags2", "+export_mvs", 0);
+  if (!reencode) av_dict_set(&dec_opts, "flags2", "+export_mvs", 0);
   err = avcodec_open2(r->dec_, codec, &dec_opts);
   av_dict_free(&dec_opts);
   if (err < 0) {
@@ -192,11 +196,20 @@ StatusOr<std::unique_ptr<MvReader>> MvReader::OpenImpl(std::unique_ptr<MvReader>
   }
   r->pkt_ = av_packet_alloc();
   r->frame_ = av_frame_alloc();
-  if (r->pkt_ == nullptr || r->frame_ == nullptr) return ResourceExhaustedError("out of memory");
+  r->reencoded_ = av_frame_alloc();
+  if (r->pkt_ == nullptr || r->frame_ == nullptr || r->reencoded_ == nullptr) {
+    return ResourceExhaustedError("out of memory");
+  }
 
   r->time_base_s_ = av_q2d(st->time_base);
   StreamInfo& info = r->info_;
   info.codec_name = codec_name;
+  if (reencode) {
+    // The vectors come from the re-encoder (opened at the first frame, when
+    // its size is certain); the stream's facts below are the re-encoder's.
+    info.reencoded_from = codec_name;
+    info.codec_name = kReencodeCodec;
+  }
   info.format_name = r->fmt_->iformat != nullptr ? r->fmt_->iformat->name : "";
   info.width_px = par->width;
   info.height_px = par->height;
@@ -204,8 +217,9 @@ StatusOr<std::unique_ptr<MvReader>> MvReader::OpenImpl(std::unique_ptr<MvReader>
   info.fps = rate.num > 0 && rate.den > 0 ? av_q2d(rate) : 0.0;
   // H.264 is quarter-pel; MPEG-1/2 and H.263 half-pel; MPEG-4 Part 2 is
   // half-pel unless the stream uses quarter_sample, seen from the first MV.
-  info.mv_precision_denom = codec_name == "h264" ? 4 : 2;
-  info.b_frame_mvs = codec_name != "mpeg4" && codec_name != "h263" && codec_name != "h263p";
+  info.mv_precision_denom = info.codec_name == "h264" ? 4 : 2;
+  info.b_frame_mvs =
+      info.codec_name != "mpeg4" && info.codec_name != "h263" && info.codec_name != "h263p";
   return StatusOr<std::unique_ptr<MvReader>>(std::move(r));
 }
 
@@ -226,7 +240,7 @@ void MvReader::Collect(AVFrame* f) {
   }
   rec.corrupt = f->decode_error_flags != 0 || (f->flags & AV_FRAME_FLAG_CORRUPT) != 0;
   rec.coded_index = f->coded_picture_number;
-  info_.max_ref_frames = std::max(info_.max_ref_frames, dec_->refs);
+  if (reencoder_ == nullptr) info_.max_ref_frames = std::max(info_.max_ref_frames, dec_->refs);
   if (rec.corrupt) {
     ++stats_.corrupt_frames;
     char where[96];
@@ -246,10 +260,13 @@ void MvReader::Collect(AVFrame* f) {
       if (m.motion_scale == 0) continue;
       MotionVector mv;
       // FFmpeg's dst is the block centre with integer pixel edges; shift to pixel centres.
-      mv.x_px = static_cast<float>(m.dst_x) - 0.5f;
-      mv.y_px = static_cast<float>(m.dst_y) - 0.5f;
-      mv.dx_px = static_cast<float>(m.motion_x) / m.motion_scale;
-      mv.dy_px = static_cast<float>(m.motion_y) / m.motion_scale;
+      // After a resolution change with the aspect kept, positions and
+      // displacements are scaled to the first frame's grid (pixel centres:
+      // x0 + 0.5 = s (x + 0.5)), as the intrinsics scaled to this size would.
+      mv.x_px = static_cast<float>(scale_x_ * m.dst_x - 0.5);
+      mv.y_px = static_cast<float>(scale_y_ * m.dst_y - 0.5);
+      mv.dx_px = static_cast<float>(scale_x_ * m.motion_x / m.motion_scale);
+      mv.dy_px = static_cast<float>(scale_y_ * m.motion_y / m.motion_scale);
       mv.w_px = m.w;
       mv.h_px = m.h;
       mv.direction = m.source > 0 ? RefDirection::kFuture : RefDirection::kPast;
@@ -258,13 +275,26 @@ void MvReader::Collect(AVFrame* f) {
     }
   }
 
-  if (options_.keep_luma && f->data[0] != nullptr) {
+  // (Not after a resolution change: the plane would not be the stream's size.)
+  if (options_.keep_luma && f->data[0] != nullptr && f->width == base_width_px_ &&
+      f->height == base_height_px_) {
     rec.luma.resize(static_cast<size_t>(f->width) * f->height);
     for (int y = 0; y < f->height; ++y) {
       std::memcpy(rec.luma.data() + static_cast<size_t>(y) * f->width,
                   f->data[0] + static_cast<ptrdiff_t>(y) * f->linesize[0], f->width);
     }
   }
+
+  // A P frame's past vectors refer to its previous anchor only when the
+  // stream keeps no more references than its GOP needs (H.264 may choose any
+  // of them per block; FFmpeg does not say which).
+  // (As StreamInfo::extra_references(), counting the B frames before this anchor.)
+  const int needed_refs =
+      (std::max(info_.max_consecutive_b, consecutive_b_) > 0 ? 2 : 1) + (info_.b_pyramid ? 1 : 0);
+  if (rec.type == PictureType::kP && info_.max_ref_frames > needed_refs) {
+    rec.reference_certain = false;
+  }
+  if (rec.type == PictureType::kB && info_.b_pyramid) rec.reference_certain = false;
 
   // GOP bookkeeping: B frames wait in pending_ until their next anchor is decoded.
   rec.prev_anchor_index = last_anchor_index_;
@@ -293,17 +323,137 @@ void MvReader::Collect(AVFrame* f) {
   ready_.push_back(std::move(rec));
 }
 
+void MvReader::Fail(Status status) {
+  if (input_status_.ok()) input_status_ = std::move(status);
+  input_done_ = true;
+  decoder_done_ = true;
+}
+
+namespace {
+
+std::string SizeString(int w, int h) { return std::to_string(w) + "x" + std::to_string(h); }
+
+}  // namespace
+
+bool MvReader::CheckFrameSize(const AVFrame* f) {
+  if (base_width_px_ == 0) {
+    // The size the pipeline's intrinsics are for: the stream's, or (RTP opened
+    // before its sender) the first frame's.
+    base_width_px_ = info_.width_px > 0 ? info_.width_px : f->width;
+    base_height_px_ = info_.height_px > 0 ? info_.height_px : f->height;
+    info_.width_px = base_width_px_;
+    info_.height_px = base_height_px_;
+    cur_width_px_ = base_width_px_;
+    cur_height_px_ = base_height_px_;
+  }
+  if (f->width == cur_width_px_ && f->height == cur_height_px_) return true;
+  const int64_t index = stats_.frames;
+  char when[64];
+  std::snprintf(when, sizeof(when), "frame %lld", static_cast<long long>(index));
+  const std::string change = std::string(when) + ": the stream's size changed from " +
+                             SizeString(cur_width_px_, cur_height_px_) + " to " +
+                             SizeString(f->width, f->height);
+  const double sx = static_cast<double>(base_width_px_) / f->width;
+  const double sy = static_cast<double>(base_height_px_) / f->height;
+  // Aspect kept: the two scales agree within 1 % (rounding of odd sizes).
+  if (f->width <= 0 || f->height <= 0 || std::abs(sx / sy - 1.0) > 0.01) {
+    Fail(FailedPreconditionError(
+        change + ", a different aspect ratio than the intrinsics' " +
+        SizeString(base_width_px_, base_height_px_) +
+        ": the intrinsics cannot be rescaled to it, so the stream ends here (the trajectory up "
+        "to here is kept); start a new session with intrinsics for the new size"));
+    return false;
+  }
+  cur_width_px_ = f->width;
+  cur_height_px_ = f->height;
+  scale_x_ = sx;
+  scale_y_ = sy;
+  if (reencoder_ != nullptr) {
+    // The re-encoder scales the image itself (below): its vectors stay on the first grid.
+    scale_x_ = scale_y_ = 1.0;
+  }
+  stats_.notes.push_back(change + " (aspect kept): intrinsics rescaled, vectors read on the " +
+                         SizeString(base_width_px_, base_height_px_) + " grid");
+  return true;
+}
+
+void MvReader::DrainReencoder() {
+  for (;;) {
+    const int err = reencoder_->Receive(reencoded_);
+    if (err == AVERROR(EAGAIN) || err == AVERROR_EOF) return;
+    if (err < 0) {
+      Fail(InternalError("decoding the re-encoded frames failed: " + AvErrorString(err)));
+      return;
+    }
+    Collect(reencoded_);
+    av_frame_unref(reencoded_);
+  }
+}
+
+void MvReader::Take(AVFrame* f) {
+  if (!input_status_.ok() && decoder_done_) return;  // the stream already ended
+  if (!CheckFrameSize(f)) return;
+  if (!info_.reencoded_from.empty()) {
+    if (reencoder_ == nullptr) {
+      auto opened = Reencoder::Open(base_width_px_, base_height_px_, options_.reencode_options);
+      if (!opened.ok()) return Fail(opened.status());
+      reencoder_ = std::move(*opened);
+    }
+    const AVFrame* in = f;
+    AVFrame* scaled = nullptr;
+    if (f->width != base_width_px_ || f->height != base_height_px_) {
+      // Aspect kept (CheckFrameSize): the image back to the first size, so the
+      // intrinsics hold; the re-encoder converts, this only scales.
+      scaled = av_frame_alloc();
+      scaled->format = f->format;
+      scaled->width = base_width_px_;
+      scaled->height = base_height_px_;
+      SwsContext* sws =
+          sws_getContext(f->width, f->height, static_cast<AVPixelFormat>(f->format), base_width_px_,
+                         base_height_px_, static_cast<AVPixelFormat>(f->format), SWS_BILINEAR,
+                         nullptr, nullptr, nullptr);
+      if (sws == nullptr || av_frame_get_buffer(scaled, 0) < 0) {
+        sws_freeContext(sws);
+        av_frame_free(&scaled);
+        return Fail(InternalError("cannot rescale a frame for re-encoding"));
+      }
+      sws_scale(sws, f->data, f->linesize, 0, f->height, scaled->data, scaled->linesize);
+      sws_freeContext(sws);
+      in = scaled;
+    }
+    const Status sent = reencoder_->Send(in, f->best_effort_timestamp);
+    av_frame_free(&scaled);
+    if (!sent.ok()) return Fail(sent);
+    stats_.reencode_cpu_s = reencoder_->cpu_s();
+    DrainReencoder();
+    stats_.reencode_cpu_s = reencoder_->cpu_s();
+    return;
+  }
+  Collect(f);
+}
+
 Status MvReader::Pump() {
   while (ready_.empty() && !decoder_done_) {
     // Drain every frame the decoder has ready.
-    int err = avcodec_receive_frame(dec_, frame_);
+    int err;
+    {
+      ScopedCpuTimer timer(&stats_.decode_cpu_s);
+      err = avcodec_receive_frame(dec_, frame_);
+    }
     if (err >= 0) {
-      Collect(frame_);
+      Take(frame_);
       av_frame_unref(frame_);
       continue;
     }
     if (err == AVERROR_EOF) {
       decoder_done_ = true;
+      if (reencoder_ != nullptr && input_status_.ok()) {
+        if (Status s = reencoder_->Send(nullptr, 0); !s.ok()) {
+          Fail(s);
+        } else {
+          DrainReencoder();
+        }
+      }
       break;
     }
     if (err != AVERROR(EAGAIN)) {
@@ -335,7 +485,10 @@ Status MvReader::Pump() {
         NoteError("packet " + std::to_string(stats_.packets) + " is marked corrupt by the demuxer");
         ++stats_.packet_errors;
       }
-      err = avcodec_send_packet(dec_, pkt_);
+      {
+        ScopedCpuTimer timer(&stats_.decode_cpu_s);
+        err = avcodec_send_packet(dec_, pkt_);
+      }
       if (err < 0 && err != AVERROR(EAGAIN)) {
         ++stats_.packet_errors;
         NoteError("packet " + std::to_string(stats_.packets) +

@@ -19,6 +19,7 @@
 #include "core/common/status.h"
 #include "core/mv/byte_source.h"
 #include "core/mv/frame_record.h"
+#include "core/mv/reencode.h"
 
 struct AVFormatContext;
 struct AVCodecContext;
@@ -39,6 +40,11 @@ struct MvReaderOptions {
   bool keep_luma = false;
   // Polled during blocking I/O; returning true aborts it (Next() then returns CANCELLED).
   std::function<bool()> interrupt;
+  // A codec whose decoder exports no motion vectors (HEVC, VP9, AV1, MJPEG, ...)
+  // is decoded and re-encoded in-process (core/mv/reencode.h) for its
+  // vectors; false refuses such a stream with FAILED_PRECONDITION instead.
+  bool reencode = true;
+  ReencodeOptions reencode_options;
 };
 
 // True if FFmpeg's decoder for this codec exports motion vectors.
@@ -76,6 +82,17 @@ class MvReader {
   // Decodes until at least one frame is ready in `ready_` or the stream ends.
   Status Pump();
   void Collect(AVFrame* frame);
+  // A decoded frame of the input: its size checked against the stream's
+  // (CheckFrameSize), then collected or re-encoded.
+  void Take(AVFrame* frame);
+  // Drains the re-encoder's frames into Collect.
+  void DrainReencoder();
+  // A frame whose size differs from the stream's first: with the aspect kept
+  // its vectors are rescaled to the first size (the intrinsics' grid) and a
+  // note says so; otherwise the stream ends with FAILED_PRECONDITION. False
+  // when the frame must be dropped.
+  bool CheckFrameSize(const AVFrame* frame);
+  void Fail(Status status);
   void NoteError(const std::string& what);
   Status EndStatus() const;
 
@@ -86,6 +103,12 @@ class MvReader {
   AVCodecContext* dec_ = nullptr;
   AVPacket* pkt_ = nullptr;
   AVFrame* frame_ = nullptr;
+  AVFrame* reencoded_ = nullptr;
+  std::unique_ptr<Reencoder> reencoder_;
+  // The first frame's size (the intrinsics'), and the current frame's scale to it.
+  int base_width_px_ = 0, base_height_px_ = 0;
+  int cur_width_px_ = 0, cur_height_px_ = 0;
+  double scale_x_ = 1.0, scale_y_ = 1.0;
   int stream_index_ = -1;
   int64_t first_pts_ = INT64_MIN;
   double time_base_s_ = 0.0;

@@ -26,6 +26,12 @@ const char* EncoderName(VideoCodec codec) {
       return "mpeg4";
     case VideoCodec::kH264:
       return "libx264";
+    case VideoCodec::kHevc:
+      return "libx265";
+    case VideoCodec::kVp9:
+      return "libvpx-vp9";
+    case VideoCodec::kMjpeg:
+      return "mjpeg";
   }
   return "";
 }
@@ -40,6 +46,12 @@ const char* VideoCodecName(VideoCodec codec) {
       return "mpeg4";
     case VideoCodec::kH264:
       return "h264";
+    case VideoCodec::kHevc:
+      return "hevc";
+    case VideoCodec::kVp9:
+      return "vp9";
+    case VideoCodec::kMjpeg:
+      return "mjpeg";
   }
   return "";
 }
@@ -48,7 +60,84 @@ StatusOr<VideoCodec> ParseVideoCodec(const std::string& name) {
   if (name == "mpeg2" || name == "mpeg2video") return VideoCodec::kMpeg2;
   if (name == "mpeg4") return VideoCodec::kMpeg4;
   if (name == "h264" || name == "libx264") return VideoCodec::kH264;
-  return InvalidArgumentError("unknown codec '" + name + "' (expected mpeg2, mpeg4 or h264)");
+  if (name == "hevc" || name == "h265" || name == "libx265") return VideoCodec::kHevc;
+  if (name == "vp9" || name == "libvpx-vp9") return VideoCodec::kVp9;
+  if (name == "mjpeg") return VideoCodec::kMjpeg;
+  return InvalidArgumentError("unknown codec '" + name +
+                              "' (expected mpeg2, mpeg4, h264, hevc, vp9 or mjpeg)");
+}
+
+namespace {
+
+constexpr int kPresetGopSecondsChoices[] = {1, 2, 4, 10};
+constexpr char kBaselinePrefix[] = "h264-baseline-ippp-";
+
+}  // namespace
+
+std::vector<std::string> EncoderPresetNames() {
+  std::vector<std::string> names = {"mpeg2-ibbbp", "mpeg4-ibbbp", "h264-ippp"};
+  for (int s : kPresetGopSecondsChoices) {
+    names.push_back(kBaselinePrefix + std::to_string(s) + "s");
+  }
+  for (const char* n : {"h264-main-bpyr-3ref", "h264-high-bpyr-3ref", "hevc", "vp9", "mjpeg"}) {
+    names.push_back(n);
+  }
+  return names;
+}
+
+StatusOr<EncoderOptions> EncoderPreset(const std::string& name, double fps) {
+  if (fps <= 0) return InvalidArgumentError("preset needs a positive fps");
+  const auto frames_in = [fps](double s) {
+    return std::max(1, static_cast<int>(std::lround(s * fps)));
+  };
+  EncoderOptions o;
+  o.fps = fps;
+  if (name == "mpeg2-ibbbp" || name == "mpeg4-ibbbp") {
+    o.codec = name == "mpeg2-ibbbp" ? VideoCodec::kMpeg2 : VideoCodec::kMpeg4;
+    return o;  // IBBBP, GOP 12, quantiser 4: EncoderOptions{}
+  }
+  o.quality = 20;  // CRF for x264 / x265 / VP9; MJPEG's quantiser is set below
+  if (name == "h264-ippp") {
+    o.codec = VideoCodec::kH264;
+    o.b_frames = 0;
+    return o;
+  }
+  if (name.rfind(kBaselinePrefix, 0) == 0) {
+    for (int s : kPresetGopSecondsChoices) {
+      if (name != kBaselinePrefix + std::to_string(s) + "s") continue;
+      o.codec = VideoCodec::kH264;
+      o.h264_profile = "baseline";
+      o.b_frames = 0;
+      o.gop_size = frames_in(s);
+      return o;
+    }
+  }
+  if (name == "h264-main-bpyr-3ref" || name == "h264-high-bpyr-3ref") {
+    o.codec = VideoCodec::kH264;
+    o.h264_profile = name == "h264-main-bpyr-3ref" ? "main" : "high";
+    o.b_frames = 3;
+    o.h264_b_pyramid = true;
+    o.h264_refs = 3;
+    o.gop_size = frames_in(2);
+    return o;
+  }
+  if (name == "hevc" || name == "vp9") {
+    o.codec = name == "hevc" ? VideoCodec::kHevc : VideoCodec::kVp9;
+    o.gop_size = frames_in(2);
+    o.quality = name == "hevc" ? 23 : 32;
+    return o;
+  }
+  if (name == "mjpeg") {
+    o.codec = VideoCodec::kMjpeg;
+    o.b_frames = 0;
+    o.gop_size = 1;
+    o.quality = 4;
+    return o;
+  }
+  std::string all;
+  for (const std::string& n : EncoderPresetNames()) all += (all.empty() ? "" : ", ") + n;
+  return InvalidArgumentError("unknown encoder preset '" + name + "' (expected one of " + all +
+                              ")");
 }
 
 VideoEncoder::~VideoEncoder() {
@@ -88,7 +177,7 @@ StatusOr<std::unique_ptr<VideoEncoder>> VideoEncoder::Open(const std::string& pa
   AVCodecContext* c = e->enc_;
   c->width = width_px;
   c->height = height_px;
-  c->pix_fmt = AV_PIX_FMT_YUV420P;
+  c->pix_fmt = o.codec == VideoCodec::kMjpeg ? AV_PIX_FMT_YUVJ420P : AV_PIX_FMT_YUV420P;
   c->framerate = av_d2q(o.fps, 100000);
   c->time_base = av_inv_q(c->framerate);
   c->gop_size = o.gop_size;
@@ -109,6 +198,21 @@ StatusOr<std::unique_ptr<VideoEncoder>> VideoEncoder::Open(const std::string& pa
         ":bframes=" + std::to_string(o.b_frames) + ":keyint=" + std::to_string(o.gop_size) +
         ":min-keyint=" + std::to_string(o.gop_size);
     av_dict_set(&opts, "x264-params", params.c_str(), 0);
+    if (!o.h264_profile.empty()) av_dict_set(&opts, "profile", o.h264_profile.c_str(), 0);
+  } else if (o.codec == VideoCodec::kHevc) {
+    // A camera's HEVC: x265's own B frames and references, a fixed GOP.
+    av_dict_set(&opts, "preset", "ultrafast", 0);
+    av_dict_set_int(&opts, "crf", o.quality, 0);
+    const std::string params = "log-level=error:scenecut=0:keyint=" + std::to_string(o.gop_size) +
+                               ":min-keyint=" + std::to_string(o.gop_size) +
+                               ":bframes=" + std::to_string(o.b_frames) +
+                               ":pools=1:frame-threads=1";
+    av_dict_set(&opts, "x265-params", params.c_str(), 0);
+  } else if (o.codec == VideoCodec::kVp9) {
+    av_dict_set(&opts, "deadline", "realtime", 0);
+    av_dict_set(&opts, "cpu-used", "8", 0);
+    av_dict_set_int(&opts, "crf", o.quality, 0);
+    c->bit_rate = 0;
   } else {
     if (o.quality < 1 || o.quality > 31) {
       avcodec_free_context(&e->enc_);
@@ -123,6 +227,7 @@ StatusOr<std::unique_ptr<VideoEncoder>> VideoEncoder::Open(const std::string& pa
     av_dict_set(&opts, "dia_size", "4", 0);
     av_dict_set(&opts, "last_pred", "3", 0);
     if (o.codec == VideoCodec::kMpeg4 && o.mpeg4_qpel) c->flags |= AV_CODEC_FLAG_QPEL;
+    if (o.codec == VideoCodec::kMjpeg) c->max_b_frames = 0;
   }
   err = avcodec_open2(c, codec, &opts);
   av_dict_free(&opts);
@@ -149,8 +254,8 @@ StatusOr<std::unique_ptr<VideoEncoder>> VideoEncoder::Open(const std::string& pa
   e->yuv_->height = height_px;
   err = av_frame_get_buffer(e->yuv_, 0);
   if (err < 0) return ResourceExhaustedError("frame buffer: " + AvErr(err));
-  e->sws_ = sws_getContext(width_px, height_px, AV_PIX_FMT_BGR24, width_px, height_px,
-                           AV_PIX_FMT_YUV420P, SWS_BICUBIC, nullptr, nullptr, nullptr);
+  e->sws_ = sws_getContext(width_px, height_px, AV_PIX_FMT_BGR24, width_px, height_px, c->pix_fmt,
+                           SWS_BICUBIC, nullptr, nullptr, nullptr);
   if (e->sws_ == nullptr) return InternalError("cannot create the colour converter");
   return StatusOr<std::unique_ptr<VideoEncoder>>(std::move(e));
 }

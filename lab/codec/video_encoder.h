@@ -1,10 +1,12 @@
 // VideoEncoder: encodes BGR frames through libavcodec (mpeg2video, mpeg4,
-// libx264) and muxes them with libavformat. Used by the simulator and by tests
-// that need streams with known content.
+// libx264, and for the re-encode path libx265, libvpx-vp9, mjpeg) and muxes
+// them with libavformat. Used by the simulator and by tests that need streams
+// with known content. EncoderPreset names camera-like settings.
 #pragma once
 
 #include <memory>
 #include <string>
+#include <vector>
 
 #include <opencv2/core.hpp>
 
@@ -19,8 +21,8 @@ struct SwsContext;
 
 namespace slapse {
 
-enum class VideoCodec { kMpeg2, kMpeg4, kH264 };
-// "mpeg2", "mpeg4", "h264".
+enum class VideoCodec { kMpeg2, kMpeg4, kH264, kHevc, kVp9, kMjpeg };
+// "mpeg2", "mpeg4", "h264", "hevc", "vp9", "mjpeg".
 const char* VideoCodecName(VideoCodec codec);
 StatusOr<VideoCodec> ParseVideoCodec(const std::string& name);
 
@@ -40,7 +42,25 @@ struct EncoderOptions {
   // encoders often use B-pyramids and several references.
   bool h264_b_pyramid = false;
   int h264_refs = 1;
+  // H.264 only: profile ("baseline", "main", "high"); empty = x264's choice.
+  std::string h264_profile;
 };
+
+// Camera-like encoder settings by name (issue 13; `slapse simulate --preset`):
+//   mpeg2-ibbbp              MPEG-2, IBBBP, GOP 12, quantiser 4 (the paper's stream)
+//   mpeg4-ibbbp              MPEG-4 Part 2, IBBBP, GOP 12, quantiser 4
+//   h264-ippp                H.264 IPPP, GOP 12, CRF 20 (the simulator's old --gop IPPP)
+//   h264-baseline-ippp-Ns    H.264 Baseline IPPP, one reference, an I frame every N s
+//                            (N = 1, 2, 4, 10: IP cameras; 10 s: a "smart" GOP)
+//   h264-main-bpyr-3ref      H.264 Main, 3 B frames, B-pyramid, 3 references, GOP 2 s
+//   h264-high-bpyr-3ref      the same with High profile (x264's defaults for B frames)
+//   hevc                     H.265 (libx265), x265's B frames and references, GOP 2 s
+//   vp9, mjpeg               other codecs without exported vectors (re-encode path;
+//                            MJPEG needs a .mkv or .avi container)
+// `fps` sets the GOPs given in seconds.
+StatusOr<EncoderOptions> EncoderPreset(const std::string& name, double fps);
+// The names above, in that order (N expanded).
+std::vector<std::string> EncoderPresetNames();
 
 class VideoEncoder {
  public:

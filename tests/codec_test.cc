@@ -1,0 +1,281 @@
+// What IP cameras send (issue 13), on real encoder output: codecs without
+// exported vectors re-encoded in-process (HEVC, VP9, MJPEG) or refused on
+// request, a resolution change mid-stream (aspect kept: rescaled and said;
+// aspect changed: a precise error), timestamp gaps and variable frame rate
+// read from pts, and the camera-like encoder presets.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "core/mv/mv_reader.h"
+#include "tests/test_streams.h"
+
+namespace slapse {
+namespace {
+
+using testing::MakeTempDir;
+using testing::ReadFileBytes;
+using testing::RunCommand;
+using testing::WritePan;
+
+constexpr double kVx = 1.5;  // pan, px per frame
+constexpr double kVy = -0.5;
+constexpr int kFrames = 30;
+
+std::vector<FrameRecord> ReadAll(MvReader* reader, Status* end) {
+  std::vector<FrameRecord> frames;
+  FrameRecord f;
+  while ((*end = reader->Next(&f)).ok()) frames.push_back(f);
+  return frames;
+}
+
+double Median(std::vector<double> v) {
+  if (v.empty()) return NAN;
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2];
+}
+
+// Median past-vector error of a P frame against the pan: a block of frame j
+// referring to anchor r moved by (r - j) * v (tests/test_streams.h).
+double MedianPError(const FrameRecord& f, double vx, double vy) {
+  std::vector<double> err;
+  const double steps = static_cast<double>(f.prev_anchor_index - f.index);
+  for (const MotionVector& mv : f.mvs) {
+    if (mv.direction != RefDirection::kPast) continue;
+    err.push_back(std::hypot(mv.dx_px - steps * vx, mv.dy_px - steps * vy));
+  }
+  return Median(err);
+}
+
+struct ReencodeCase {
+  const char* preset;  // lab/codec EncoderPreset
+  const char* ext;
+  const char* codec;  // FFmpeg's name of the stream's codec
+};
+
+class ReencodeTest : public ::testing::TestWithParam<ReencodeCase> {};
+
+// A stream whose codec exports no vectors comes out of MvReader as a
+// re-encoded MPEG-2 IBBBP stream: every frame, in display order, with the
+// source's timestamps and vectors that match the known pan.
+TEST_P(ReencodeTest, CodecWithoutVectorsIsReencodedWithCorrectVectorsAndTimes) {
+  const ReencodeCase& rc = GetParam();
+  auto eo = EncoderPreset(rc.preset, 30.0);
+  ASSERT_TRUE(eo.ok()) << eo.status().ToString();
+  const std::string path = MakeTempDir("reencode") + "/pan." + rc.ext;
+  ASSERT_TRUE(WritePan(path, *eo, kFrames, kVx, kVy).ok());
+
+  for (const bool from_bytes : {false, true}) {
+    SCOPED_TRACE(from_bytes ? "byte source" : "file");
+    auto reader = from_bytes
+                      ? MvReader::Open(std::make_unique<MemoryByteSource>(ReadFileBytes(path)))
+                      : MvReader::Open(path);
+    ASSERT_TRUE(reader.ok()) << reader.status().ToString();
+    EXPECT_EQ((*reader)->info().reencoded_from, rc.codec);
+    EXPECT_EQ((*reader)->info().codec_name, kReencodeCodec);
+    Status end;
+    const std::vector<FrameRecord> frames = ReadAll(reader->get(), &end);
+    EXPECT_EQ(end.code(), StatusCode::kOutOfRange) << end.ToString();
+    ASSERT_EQ(frames.size(), static_cast<size_t>(kFrames));
+    int p_frames = 0, b_frames = 0;
+    for (size_t i = 0; i < frames.size(); ++i) {
+      const FrameRecord& f = frames[i];
+      EXPECT_EQ(f.index, static_cast<int64_t>(i));
+      // The source's presentation times (30 fps), not the re-encoder's clock.
+      EXPECT_NEAR(f.timestamp_s, i / 30.0, 1e-3) << "frame " << i;
+      if (f.type == PictureType::kB) ++b_frames;
+      // (The stream's last anchor may close a shorter run, and comes out of
+      // the final flush without vectors.)
+      if (f.type != PictureType::kP || f.mvs.empty() || i + 4 >= frames.size()) continue;
+      ++p_frames;
+      EXPECT_EQ(f.prev_anchor_index, f.index - 4) << "IBBBP: anchors 4 frames apart";
+      EXPECT_LT(MedianPError(f, kVx, kVy), 0.5) << "frame " << i;
+    }
+    EXPECT_GE(p_frames, 4);
+    EXPECT_GE(b_frames, 15);
+    const ReadStats& st = (*reader)->stats();
+    EXPECT_GT(st.reencode_cpu_s, 0.0);
+    EXPECT_GT(st.decode_cpu_s, 0.0);
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Codecs, ReencodeTest,
+    ::testing::Values(ReencodeCase{"hevc", "ts", "hevc"}, ReencodeCase{"hevc", "mkv", "hevc"},
+                      ReencodeCase{"vp9", "webm", "vp9"}, ReencodeCase{"mjpeg", "mkv", "mjpeg"}),
+    [](const auto& info) { return std::string(info.param.codec) + "_" + info.param.ext; });
+
+TEST(ReencodeTest, RefuseOptionGivesFailedPreconditionNamingTheCodec) {
+  auto eo = EncoderPreset("hevc", 30.0);
+  ASSERT_TRUE(eo.ok());
+  const std::string path = MakeTempDir("refuse") + "/pan.ts";
+  ASSERT_TRUE(WritePan(path, *eo, 8, kVx, kVy).ok());
+  MvReaderOptions o;
+  o.reencode = false;
+  auto reader = MvReader::Open(path, o);
+  ASSERT_FALSE(reader.ok());
+  EXPECT_EQ(reader.status().code(), StatusCode::kFailedPrecondition);
+  EXPECT_NE(reader.status().message().find("'hevc'"), std::string::npos)
+      << reader.status().message();
+  EXPECT_NE(reader.status().message().find("re-encoding is off"), std::string::npos);
+  // The default re-encodes the same file.
+  EXPECT_TRUE(MvReader::Open(path).ok());
+}
+
+TEST(ReencodeTest, OptionsAreChecked) {
+  ReencodeOptions o;
+  EXPECT_TRUE(o.Check().ok());
+  o.quantiser = 0;
+  EXPECT_EQ(o.Check().code(), StatusCode::kInvalidArgument);
+  o = ReencodeOptions{};
+  o.gop_size = 0;
+  EXPECT_EQ(o.Check().code(), StatusCode::kInvalidArgument);
+}
+
+// Two clips joined by FFmpeg's concat demuxer (stream copy, continuous
+// timestamps), as a camera that switches its resolution sends them.
+std::string Concat(const std::string& dir, const std::string& a, const std::string& b,
+                   const std::string& ext) {
+  {
+    std::ofstream list(dir + "/list.txt");
+    list << "file '" << a << "'\nfile '" << b << "'\n";
+  }
+  const std::string out = dir + "/joined." + ext;
+  const int rc = RunCommand("ffmpeg -nostdin -loglevel error -y -f concat -safe 0 -i " + dir +
+                            "/list.txt -c copy " + out);
+  return rc == 0 ? out : "";
+}
+
+struct ResizeCase {
+  const char* preset;
+  const char* ext;
+};
+
+class ResolutionChangeTest : public ::testing::TestWithParam<ResizeCase> {};
+
+// 320x240 then 160x120 (aspect kept, the pan halved with the image): the
+// reader says so in a note and reads the second clip's vectors on the first
+// clip's grid, so they match the first clip's pan in its pixels.
+TEST_P(ResolutionChangeTest, AspectKeptIsRescaledAndSaid) {
+  auto eo = EncoderPreset(GetParam().preset, 30.0);
+  ASSERT_TRUE(eo.ok());
+  const std::string ext = GetParam().ext;
+  const std::string dir = MakeTempDir("resize");
+  ASSERT_TRUE(WritePan(dir + "/a." + ext, *eo, 24, kVx, kVy, 320, 240).ok());
+  ASSERT_TRUE(WritePan(dir + "/b." + ext, *eo, 24, kVx / 2, kVy / 2, 160, 120).ok());
+  const std::string joined = Concat(dir, dir + "/a." + ext, dir + "/b." + ext, ext);
+  ASSERT_FALSE(joined.empty());
+  auto reader = MvReader::Open(joined);
+  ASSERT_TRUE(reader.ok()) << reader.status().ToString();
+  Status end;
+  const std::vector<FrameRecord> frames = ReadAll(reader->get(), &end);
+  EXPECT_EQ(end.code(), StatusCode::kOutOfRange) << end.ToString();
+  // 48, or 47 for MPEG-2: FFmpeg's decoder drops the old sequence's last
+  // (delayed) anchor at the new sequence header (ffprobe counts 47 too).
+  EXPECT_GE(frames.size(), 47u);
+  EXPECT_LE(frames.size(), 48u);
+  const ReadStats& st = (*reader)->stats();
+  ASSERT_EQ(st.notes.size(), 1u);
+  EXPECT_NE(st.notes[0].find("320x240 to 160x120"), std::string::npos) << st.notes[0];
+  EXPECT_NE(st.notes[0].find("aspect kept"), std::string::npos) << st.notes[0];
+  EXPECT_EQ((*reader)->info().width_px, 320);
+  int checked = 0;
+  for (const FrameRecord& f : frames) {
+    if (f.type != PictureType::kP || f.index < 28 || f.prev_anchor_index < 24) continue;
+    EXPECT_LT(MedianPError(f, kVx, kVy), 0.6) << "frame " << f.index;
+    ++checked;
+  }
+  EXPECT_GE(checked, 2);
+}
+
+// 320x240 then 320x180: the intrinsics cannot follow; the frames before the
+// change are yielded, then a FAILED_PRECONDITION that names both sizes.
+TEST_P(ResolutionChangeTest, AspectChangedEndsWithPreciseError) {
+  auto eo = EncoderPreset(GetParam().preset, 30.0);
+  ASSERT_TRUE(eo.ok());
+  const std::string ext = GetParam().ext;
+  const std::string dir = MakeTempDir("reaspect");
+  ASSERT_TRUE(WritePan(dir + "/a." + ext, *eo, 24, kVx, kVy, 320, 240).ok());
+  ASSERT_TRUE(WritePan(dir + "/b." + ext, *eo, 24, kVx, kVy, 320, 180).ok());
+  const std::string joined = Concat(dir, dir + "/a." + ext, dir + "/b." + ext, ext);
+  ASSERT_FALSE(joined.empty());
+  auto reader = MvReader::Open(joined);
+  ASSERT_TRUE(reader.ok()) << reader.status().ToString();
+  Status end;
+  const std::vector<FrameRecord> frames = ReadAll(reader->get(), &end);
+  EXPECT_EQ(end.code(), StatusCode::kFailedPrecondition) << end.ToString();
+  EXPECT_NE(end.message().find("from 320x240 to 320x180"), std::string::npos) << end.message();
+  EXPECT_NE(end.message().find("aspect ratio"), std::string::npos) << end.message();
+  EXPECT_GE(frames.size(), 20u);
+  EXPECT_LE(frames.size(), 24u);
+  for (const FrameRecord& f : frames) EXPECT_LT(f.index, 24);
+}
+
+INSTANTIATE_TEST_SUITE_P(Codecs, ResolutionChangeTest,
+                         ::testing::Values(ResizeCase{"h264-baseline-ippp-1s", "ts"},
+                                           ResizeCase{"mpeg2-ibbbp", "ts"},
+                                           ResizeCase{"hevc", "ts"}),
+                         [](const auto& info) {
+                           std::string n = info.param.preset;
+                           std::replace(n.begin(), n.end(), '-', '_');
+                           return n;
+                         });
+
+// Timestamps come from pts: a stream with a 1 s gap (dropped frames, "smart
+// FPS") and a stretch at half the frame rate keeps them, for direct and
+// re-encoded reading alike.
+TEST(TimestampTest, GapsAndVariableFrameRateComeFromPts) {
+  for (const char* preset : {"h264-baseline-ippp-2s", "hevc"}) {
+    SCOPED_TRACE(preset);
+    auto eo = EncoderPreset(preset, 30.0);
+    ASSERT_TRUE(eo.ok());
+    eo->b_frames = 0;  // pts = dts order, so setts can rewrite both alike
+    const std::string dir = MakeTempDir("vfr");
+    ASSERT_TRUE(WritePan(dir + "/cfr.ts", *eo, 30, kVx, kVy).ok());
+    // Frames 0-9 at 30 fps, then a 1 s gap, then 15 fps: in 90 kHz ticks a
+    // frame is 3000; from N = 10 on pts += 90000 + (N-10)*3000. (No commas:
+    // the bitstream filter list splits on them; not(not(floor(N/10))) is N >= 10.)
+    const std::string expr = "PTS+not(not(floor(N/10)))*(90000+(N-10)*3000)";
+    ASSERT_EQ(RunCommand("ffmpeg -nostdin -loglevel error -y -i " + dir +
+                         "/cfr.ts -c copy -bsf:v 'setts=pts=" + expr + ":dts=" + expr + "' " + dir +
+                         "/vfr.ts"),
+              0);
+    auto reader = MvReader::Open(dir + "/vfr.ts");
+    ASSERT_TRUE(reader.ok()) << reader.status().ToString();
+    Status end;
+    const std::vector<FrameRecord> frames = ReadAll(reader->get(), &end);
+    ASSERT_EQ(frames.size(), 30u) << end.ToString();
+    for (const FrameRecord& f : frames) {
+      const double want =
+          f.index < 10 ? f.index / 30.0 : f.index / 30.0 + 1.0 + (f.index - 10) / 30.0;
+      EXPECT_NEAR(f.timestamp_s, want, 2e-3) << "frame " << f.index;
+    }
+  }
+}
+
+TEST(PresetTest, NamesParseAndUnknownNamesListTheChoices) {
+  for (const std::string& name : EncoderPresetNames()) {
+    auto p = EncoderPreset(name, 25.0);
+    EXPECT_TRUE(p.ok()) << name << ": " << p.status().ToString();
+  }
+  auto b = EncoderPreset("h264-baseline-ippp-4s", 25.0);
+  ASSERT_TRUE(b.ok());
+  EXPECT_EQ(b->gop_size, 100);
+  EXPECT_EQ(b->b_frames, 0);
+  EXPECT_EQ(b->h264_profile, "baseline");
+  auto h = EncoderPreset("h264-high-bpyr-3ref", 25.0);
+  ASSERT_TRUE(h.ok());
+  EXPECT_TRUE(h->h264_b_pyramid);
+  EXPECT_EQ(h->h264_refs, 3);
+  auto bad = EncoderPreset("h264-fancy", 25.0);
+  EXPECT_EQ(bad.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(bad.status().message().find("h264-high-bpyr-3ref"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace slapse
