@@ -246,7 +246,18 @@ void SessionRunner::ApplyUpdatesLocked(const StepUpdates& u,
     s.planes.clear();
     for (const auto& [id, mp] : *u.plane_map) s.planes[id] = api::MapPlaneToProto(mp);
   }
-  for (const TimedPose& p : u.new_points) s.trajectory.push_back(api::TimedPoseToProto(p));
+  // The trajectory snapshot holds every posed frame: a pose of a frame it
+  // holds is a revision and replaces it, others come after the last.
+  for (const FramePose& p : u.frame_poses) {
+    auto it = std::lower_bound(
+        s.trajectory.begin(), s.trajectory.end(), p.pose.index,
+        [](const v1::Trajectory::Point& q, int64_t index) { return q.anchor_index() < index; });
+    if (it != s.trajectory.end() && it->anchor_index() == p.pose.index) {
+      *it = api::FramePoseToPoint(p);
+    } else {
+      s.trajectory.push_back(api::FramePoseToPoint(p));
+    }
+  }
 
   v1::SessionEvent pose;
   v1::PoseUpdate* pu = pose.mutable_pose();
@@ -256,6 +267,8 @@ void SessionRunner::ApplyUpdatesLocked(const StepUpdates& u,
   pu->set_tracking(u.pose.tracking);
   pu->set_metric(u.pose.metric);
   pu->set_note(u.pose.note);
+  if (u.pose.tracking) *pu->mutable_quality() = api::PoseQualityToProto(u.pose.quality);
+  for (const FramePose& p : u.frame_poses) *pu->add_frame_poses() = api::FramePoseToProto(p);
   auto r = received_.find(u.pose.anchor_index);
   if (r != received_.end()) *pu->mutable_frame_received_time() = r->second;
   received_.erase(received_.begin(), received_.upper_bound(u.pose.anchor_index));
