@@ -82,6 +82,7 @@ v1::PipelineOptions PipelineOptionsToProto(const PipelineOptions& o) {
   v1::PipelineOptions out;
   out.set_eps_h_px(o.extraction.eps_h_px);
   out.set_scale_source(ScaleSourceToProto(o.scale.source));
+  out.set_anchors_only(!o.frame_poses.enabled);
   switch (o.scale.source) {
     case ScaleOptions::Source::kFirstStep:
       out.set_first_step_m(o.scale.first_step_m);
@@ -102,6 +103,7 @@ PipelineOptions PipelineOptionsFromProto(const v1::PipelineOptions& p) {
   PipelineOptions o;
   // 0 = the default: PlaneExtractionOptions' own.
   if (p.eps_h_px() > 0) o.extraction.eps_h_px = p.eps_h_px();
+  o.frame_poses.enabled = !p.anchors_only();
   o.scale.source = ScaleSourceFromProto(p.scale_source());
   switch (o.scale.source) {
     case ScaleOptions::Source::kFirstStep:

@@ -31,7 +31,8 @@ Rigid3d PoseFromProto(const v1::Pose& pose);
 v1::Vec3 Vec3ToProto(const Eigen::Vector3d& v);
 Eigen::Vector3d Vec3FromProto(const v1::Vec3& v);
 
-// Pipeline options: eps_h_px and the scale source with its one parameter.
+// Pipeline options: eps_h_px, the scale source with its one parameter, and
+// whether the frames between anchors are posed (anchors_only).
 v1::PipelineOptions PipelineOptionsToProto(const PipelineOptions& options);
 PipelineOptions PipelineOptionsFromProto(const v1::PipelineOptions& options);
 v1::PipelineOptions::ScaleSource ScaleSourceToProto(ScaleOptions::Source source);

@@ -2,7 +2,7 @@
 // drive, for one or more settings of the frame-pose estimator.
 //
 //   build/bench/frame_pose_accuracy --seeds 1,2,3 --duration 5 [--dir /tmp/fpa]
-//       [--prior-rot 0.01,0] [--extra-sigma 1.0] [--min-inliers 20]
+//       [--prior-rot 0.01,0] [--prior-pos 0,0.05] [--extra-sigma 1.0] [--min-inliers 20]
 //
 // Simulates each seed's drive once into DIR/seedN (640x480 MPEG-2 IBBBP, the
 // simulator's defaults; reused when there), runs the pipeline for each
@@ -92,19 +92,22 @@ void RunOne(uint64_t seed, const Drive& d, const slapse::FramePoseOptions& fo,
     return;
   }
   std::printf(
-      "| %llu | %.3g | %.2g | %ld | %zu | %.3f | %.3f (%d) | %.3f | %.4f | %.4f | %d | %.3f | "
-      "%.1f %% |\n",
-      static_cast<unsigned long long>(seed), fo.prior_rotation_rad, fo.extra_sigma_px, frames,
-      pipeline.poses().size(), e->anchor.rmse_m, e->frame.rmse_m, e->frame.poses,
-      e->frame_baseline.rmse_m, e->frame_local.rmse_m, e->frame_baseline_local.rmse_m,
-      e->interpolated.poses, e->all.max_m, stage_ms > 0 ? 100.0 * frame_ms / stage_ms : 0.0);
+      "| %llu | %.3g | %.2g | %.2g | %ld | %zu | %.3f | %.3f (%d) | %.3f | %.4f | %.4f | %.3f | "
+      "%.3f | %.3f | %d | %.3f | %.1f %% |\n",
+      static_cast<unsigned long long>(seed), fo.prior_rotation_rad, fo.prior_position_rel,
+      fo.extra_sigma_px, frames, pipeline.poses().size(), e->anchor.rmse_m, e->frame.rmse_m,
+      e->frame.poses, e->frame_baseline.rmse_m, e->frame_local.rmse_m,
+      e->frame_baseline_local.rmse_m, e->anchors.rpe_rot_rmse_deg, e->frame_local.rot_rmse_deg,
+      e->frame_baseline_local.rot_rmse_deg, e->interpolated.poses, e->all.max_m,
+      stage_ms > 0 ? 100.0 * frame_ms / stage_ms : 0.0);
   std::fflush(stdout);
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string seeds = "1,2,3", dir = "/tmp/frame_pose_accuracy", prior_rot = "0.01", extra = "1.0";
+  std::string seeds = "1,2,3", dir = "/tmp/frame_pose_accuracy", prior_rot = "0.01", extra = "1.0",
+              prior_pos = "0";
   double duration_s = 5.0;
   int min_inliers = slapse::FramePoseOptions().min_inliers;
   for (int i = 1; i + 1 < argc; i += 2) {
@@ -119,6 +122,8 @@ int main(int argc, char** argv) {
       prior_rot = v;
     else if (a == "--extra-sigma")
       extra = v;
+    else if (a == "--prior-pos")
+      prior_pos = v;
     else if (a == "--min-inliers")
       min_inliers = std::atoi(v.c_str());
     else {
@@ -128,10 +133,12 @@ int main(int argc, char** argv) {
     }
   }
   std::printf(
-      "| seed | prior rot | extra sigma | frames | poses | anchors RMSE m | FRAME RMSE m (n) | "
-      "same frames interpolated m | FRAME local m | interpolated local m | INTERPOLATED | max "
-      "error m | frame-pose share of stage time |\n"
-      "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+      "| seed | prior rot | prior pos | extra sigma | frames | poses | anchors RMSE m | FRAME "
+      "RMSE m (n) | same frames interpolated m | FRAME local m | interpolated local m | anchors "
+      "RPE rot deg | FRAME local rot deg | interpolated local rot deg | INTERPOLATED | max error m "
+      "| frame-pose "
+      "share of stage time |\n"
+      "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
   for (double seed_d : ParseList(seeds)) {
     const uint64_t seed = static_cast<uint64_t>(seed_d);
     Drive d;
@@ -140,13 +147,16 @@ int main(int argc, char** argv) {
     if (!gt.ok()) return 1;
     const auto truth = slapse::TruthPoses(*gt);
     for (double pr : ParseList(prior_rot)) {
-      for (double ex : ParseList(extra)) {
-        slapse::FramePoseOptions fo;
-        fo.prior_rotation_rad = pr;
-        fo.extra_sigma_px = ex;
-        fo.min_inliers = min_inliers;
-        if (!fo.Check().ok()) return 2;
-        RunOne(seed, d, fo, truth);
+      for (double pp : ParseList(prior_pos)) {
+        for (double ex : ParseList(extra)) {
+          slapse::FramePoseOptions fo;
+          fo.prior_rotation_rad = pr;
+          fo.prior_position_rel = pp;
+          fo.extra_sigma_px = ex;
+          fo.min_inliers = min_inliers;
+          if (!fo.Check().ok()) return 2;
+          RunOne(seed, d, fo, truth);
+        }
       }
     }
   }

@@ -85,6 +85,7 @@ TEST(FramePoseTest, RecoversThePoseFromNoisyVectorsWithOutliers) {
   FramePoseOptions o;
   o.extra_sigma_px = 0.0;
   o.prior_rotation_rad = 0.0;  // data only: the prior must not be what lands it
+  o.prior_position_rel = 0.0;
   ASSERT_TRUE(o.Check().ok());
   FramePoseReport rep;
   const auto pose = EstimateFramePose(k, obs, prior, 1.0, o, &rep);

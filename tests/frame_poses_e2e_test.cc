@@ -8,12 +8,15 @@
 #include <cmath>
 #include <cstdio>
 #include <set>
+#include <sstream>
+#include <string>
 #include <vector>
 
 #include <gtest/gtest.h>
 
 #include "core/mv/mv_reader.h"
 #include "core/pipeline/pipeline.h"
+#include "core/pipeline/result_io.h"
 #include "lab/eval/frame_pose_eval.h"
 #include "lab/eval/trajectory_eval.h"
 #include "lab/gt/ground_truth.h"
@@ -80,6 +83,49 @@ TEST(FramePosesEndToEndTest, EveryFrameHasAPoseNearTheTruth) {
     EXPECT_TRUE(std::isfinite(p.quality.position_sigma) && p.quality.position_sigma > 0);
     EXPECT_GE(p.quality.inliers, FramePoseOptions().min_inliers);
   }
+  // run's files: the TUM file stays valid TUM (8 numbers a line, increasing
+  // timestamps), the quality CSV has one row per TUM line, kind by kind.
+  std::ostringstream tum, csv;
+  WriteTrajectoryTum(TimedPosesOf(poses), tum);
+  WritePoseQualityCsv(poses, csv);
+  std::istringstream tum_in(tum.str()), csv_in(csv.str());
+  std::string line, row;
+  ASSERT_TRUE(std::getline(csv_in, row));
+  EXPECT_EQ(row,
+            "frame_index,timestamp_s,kind,position_sigma,inliers,rms_px,revision,gap_frames,note");
+  double last_t = -1;
+  size_t lines = 0;
+  while (std::getline(tum_in, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream fields(line);
+    std::vector<double> v;
+    double x;
+    while (fields >> x) v.push_back(x);
+    ASSERT_EQ(v.size(), 8u) << line;
+    EXPECT_GT(v[0], last_t);
+    last_t = v[0];
+    ASSERT_TRUE(std::getline(csv_in, row));
+    ASSERT_LT(lines, poses.size());
+    EXPECT_EQ(row.rfind(std::to_string(poses[lines].pose.index) + ",", 0), 0u) << row;
+    EXPECT_NE(row.find(std::string(",") + PoseKindName(poses[lines].quality.kind) + ","),
+              std::string::npos)
+        << row;
+    ++lines;
+  }
+  EXPECT_EQ(lines, poses.size());
+  EXPECT_FALSE(std::getline(csv_in, row));
+
+  // Relative to their anchors (free of the anchors' drift): the frames'
+  // own vectors must not make the rotation worse than interpolating, nor
+  // move the position off it by more than a few millimetres.
+  std::printf(
+      "local to the anchors: position %.4f m (interpolated %.4f m), rotation %.4f deg "
+      "(interpolated %.4f deg)\n",
+      errors->frame_local.rmse_m, errors->frame_baseline_local.rmse_m,
+      errors->frame_local.rot_rmse_deg, errors->frame_baseline_local.rot_rmse_deg);
+  EXPECT_LT(errors->frame_local.rot_rmse_deg, errors->frame_baseline_local.rot_rmse_deg);
+  EXPECT_LT(errors->frame_local.rmse_m, 2.0 * errors->frame_baseline_local.rmse_m + 0.003);
+
   // The frames' error: within 1.5x the anchors' (they hang between them),
   // and no pose far from the truth.
   EXPECT_LT(errors->frame.rmse_m, 1.5 * errors->anchor.rmse_m + 0.02);

@@ -190,6 +190,9 @@ int RunRun(int argc, char** argv) {
       ->type_name("FILE");
   bool quiet = false;
   app.add_flag("--quiet", quiet, "no progress line");
+  bool anchors_only = !po.frame_poses.enabled;
+  app.add_flag("--anchors-only", anchors_only,
+               "pose the anchor frames only (default: every frame between tracked anchors too)");
   if (int rc = cl.Parse(argc, argv); rc >= 0) return rc;
   if (cl.positional().size() != 1) return Fail("run", "expected one INPUT (see --help)", 2);
   const std::string input = cl.positional()[0];
@@ -199,6 +202,7 @@ int RunRun(int argc, char** argv) {
   auto scale = scale_flags.Options();
   if (!scale.ok()) return Fail("run", scale.status().message(), 2);
   po.scale = *scale;
+  po.frame_poses.enabled = !anchors_only;
 
   std::optional<GroundTruth> gt;
   if (cl.Has("gt")) {

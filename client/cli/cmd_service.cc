@@ -284,6 +284,9 @@ int RunCreate(int argc, char** argv) {
       ->capture_default_str();
   ScaleFlags scale_flags;
   scale_flags.AddTo(&cl);
+  bool anchors_only = !PipelineOptions{}.frame_poses.enabled;
+  app.add_flag("--anchors-only", anchors_only,
+               "pose the anchor frames only (default: every frame between tracked anchors too)");
   if (int rc = ParseOrExit(cl, argc, argv, 0); rc >= 0) return rc;
   v1::Session request;
   if (Status s = SetSource(cl, source, &request); !s.ok()) return Fail("create", s.message(), 2);
@@ -300,6 +303,7 @@ int RunCreate(int argc, char** argv) {
   PipelineOptions options;
   options.extraction.eps_h_px = eps_h_px;
   options.scale = *scale;
+  options.frame_poses.enabled = !anchors_only;
   *request.mutable_pipeline_options() = api::PipelineOptionsToProto(options);
   auto session = Connect(server)->CreateSession(request);
   if (!session.ok()) return Fail("create", session.status().ToString());

@@ -14,6 +14,24 @@ namespace {
 using Vector6d = Eigen::Matrix<double, 6, 1>;
 using Matrix6d = Eigen::Matrix<double, 6, 6>;
 
+// FramePoseResidual with R^T of the pose given (computed once per pass).
+bool ResidualAt(const Intrinsics& k, const Eigen::Matrix3d& Rt, const Eigen::Vector3d& t,
+                const FramePoseObservation& obs, Eigen::Vector2d* residual,
+                Eigen::Matrix<double, 2, 6>* jacobian) {
+  const Eigen::Vector3d X = Rt * (obs.point_world - t);  // X_c
+  if (!(X.z() > 1e-9)) return false;
+  const double iz = 1.0 / X.z();
+  *residual =
+      Eigen::Vector2d(k.fx_px * X.x() * iz + k.cx_px, k.fy_px * X.y() * iz + k.cy_px) - obs.x_px;
+  if (jacobian != nullptr) {
+    Eigen::Matrix<double, 2, 3> dpi;
+    dpi << k.fx_px * iz, 0, -k.fx_px * X.x() * iz * iz, 0, k.fy_px * iz, -k.fy_px * X.y() * iz * iz;
+    jacobian->leftCols<3>() = dpi * Skew(X);  // dX_c/dtheta = [X_c]_x
+    jacobian->rightCols<3>() = -dpi * Rt;     // dX_c/dt = -R^T
+  }
+  return true;
+}
+
 // The normal equations of the data term at `pose` (see frame_pose.h), the
 // Huber weights from the current residuals.
 struct NormalEquations {
@@ -24,21 +42,22 @@ struct NormalEquations {
 };
 
 NormalEquations DataTerm(const Intrinsics& k, const std::vector<FramePoseObservation>& obs,
-                         const Rigid3d& pose, const FramePoseOptions& o) {
+                         const Rigid3d& pose, const FramePoseOptions& o, bool median_depth) {
   NormalEquations ne;
   std::vector<double> depths;
-  depths.reserve(obs.size());
+  if (median_depth) depths.reserve(obs.size());
   const double extra2 = o.extra_sigma_px * o.extra_sigma_px;
+  const Eigen::Matrix3d Rt = pose.R().transpose();
   for (const FramePoseObservation& ob : obs) {
     Eigen::Vector2d r;
     Eigen::Matrix<double, 2, 6> J;
-    if (!FramePoseResidual(k, pose, ob, &r, &J)) continue;
+    if (!ResidualAt(k, Rt, pose.translation, ob, &r, &J)) continue;
     const double s2 = ob.variance_px2 + extra2;
     const double e = r.norm() / std::sqrt(s2);  // normalised residual
     const double w = e <= o.huber_k ? 1.0 : o.huber_k / e;
     ne.H.noalias() += (w / s2) * J.transpose() * J;
     ne.g.noalias() += (w / s2) * J.transpose() * r;
-    depths.push_back((pose.Inverse() * ob.point_world).z());
+    if (median_depth) depths.push_back(Rt.row(2).dot(ob.point_world - pose.translation));
     ++ne.used;
   }
   if (!depths.empty()) {
@@ -93,19 +112,8 @@ Status FramePoseOptions::Check(const std::string& who) const {
 bool FramePoseResidual(const Intrinsics& k, const Rigid3d& world_from_cam,
                        const FramePoseObservation& obs, Eigen::Vector2d* residual,
                        Eigen::Matrix<double, 2, 6>* jacobian) {
-  const Eigen::Matrix3d Rt = world_from_cam.R().transpose();
-  const Eigen::Vector3d X = Rt * (obs.point_world - world_from_cam.translation);  // X_c
-  if (!(X.z() > 1e-9)) return false;
-  const double iz = 1.0 / X.z();
-  *residual =
-      Eigen::Vector2d(k.fx_px * X.x() * iz + k.cx_px, k.fy_px * X.y() * iz + k.cy_px) - obs.x_px;
-  if (jacobian != nullptr) {
-    Eigen::Matrix<double, 2, 3> dpi;
-    dpi << k.fx_px * iz, 0, -k.fx_px * X.x() * iz * iz, 0, k.fy_px * iz, -k.fy_px * X.y() * iz * iz;
-    jacobian->leftCols<3>() = dpi * Skew(X);  // dX_c/dtheta = [X_c]_x
-    jacobian->rightCols<3>() = -dpi * Rt;     // dX_c/dt = -R^T
-  }
-  return true;
+  return ResidualAt(k, world_from_cam.R().transpose(), world_from_cam.translation, obs, residual,
+                    jacobian);
 }
 
 Rigid3d RetractFramePose(const Rigid3d& world_from_cam, const Eigen::Matrix<double, 6, 1>& delta) {
@@ -131,7 +139,7 @@ std::optional<Rigid3d> EstimateFramePose(const Intrinsics& intrinsics,
   Rigid3d pose = prior_world_from_cam;
   NormalEquations ne;
   for (rep.iterations = 0; rep.iterations < o.max_iterations; ++rep.iterations) {
-    ne = DataTerm(intrinsics, observations, pose, o);
+    ne = DataTerm(intrinsics, observations, pose, o, false);
     if (ne.used < o.min_inliers) break;
     AddPrior(pose, prior_world_from_cam, o.prior_rotation_rad, sigma_pos, &ne);
     const Eigen::LDLT<Matrix6d> ldlt(ne.H);
@@ -142,12 +150,13 @@ std::optional<Rigid3d> EstimateFramePose(const Intrinsics& intrinsics,
     if (delta.norm() < o.step_tolerance) break;
   }
   // The solution's data term, alone (degeneracy) and with the prior (covariance).
-  ne = DataTerm(intrinsics, observations, pose, o);
+  ne = DataTerm(intrinsics, observations, pose, o, true);
   const double extra2 = o.extra_sigma_px * o.extra_sigma_px;
   double sq = 0;
+  const Eigen::Matrix3d Rt = pose.R().transpose();
   for (const FramePoseObservation& ob : observations) {
     Eigen::Vector2d r;
-    if (!FramePoseResidual(intrinsics, pose, ob, &r, nullptr)) continue;
+    if (!ResidualAt(intrinsics, Rt, pose.translation, ob, &r, nullptr)) continue;
     if (r.squaredNorm() > o.inlier_sigmas * o.inlier_sigmas * (ob.variance_px2 + extra2)) continue;
     ++rep.inliers;
     sq += r.squaredNorm();

@@ -5,19 +5,23 @@
 #include <cstddef>
 #include <map>
 
+#include <Eigen/Geometry>
+
 namespace slapse {
 namespace {
 
 bool IsAnchorKind(PoseKind k) { return k == PoseKind::kAnchor || k == PoseKind::kCoasting; }
 
-void Add(double e, PositionErrorStats* s) {
+void Add(double e, PositionErrorStats* s, double rot_deg = 0.0) {
   ++s->poses;
-  s->rmse_m += e * e;  // sum of squares until Finish
+  s->rmse_m += e * e;  // sums of squares until Finish
+  s->rot_rmse_deg += rot_deg * rot_deg;
   s->max_m = std::max(s->max_m, e);
 }
 
 void Finish(PositionErrorStats* s) {
   s->rmse_m = s->poses > 0 ? std::sqrt(s->rmse_m / s->poses) : 0.0;
+  s->rot_rmse_deg = s->poses > 0 ? std::sqrt(s->rot_rmse_deg / s->poses) : 0.0;
 }
 
 }  // namespace
@@ -39,6 +43,15 @@ StatusOr<FramePoseErrors> EvaluateFramePoses(const std::vector<FramePose>& poses
     return align * est.translation - truth_at.at(index)->world_from_cam.translation;
   };
   auto error = [&](const Rigid3d& est, int64_t index) { return residual(est, index).norm(); };
+  // The rotation from anchor `a` to frame `f`, estimated against true (no
+  // alignment needed; a position alignment leaves the roll about a straight
+  // path undetermined).
+  auto rel_rot_error_deg = [&](const Rigid3d& est_a, int64_t a, const Rigid3d& est_f, int64_t f) {
+    const Eigen::Matrix3d est = est_a.R().transpose() * est_f.R();
+    const Eigen::Matrix3d tru =
+        truth_at.at(a)->world_from_cam.R().transpose() * truth_at.at(f)->world_from_cam.R();
+    return Eigen::AngleAxisd(tru.transpose() * est).angle() * 180.0 / M_PI;
+  };
   const TimedPose* before = nullptr;  // the last anchor
   for (size_t i = 0; i < poses.size(); ++i) {
     const FramePose& p = poses[i];
@@ -66,8 +79,11 @@ StatusOr<FramePoseErrors> EvaluateFramePoses(const std::vector<FramePose>& poses
     const double alpha = span > 0 ? (p.pose.timestamp_s - before->timestamp_s) / span : 0.0;
     const Eigen::Vector3d anchors = (1 - alpha) * residual(before->world_from_cam, before->index) +
                                     alpha * residual(after->pose.world_from_cam, after->pose.index);
-    Add((residual(p.pose.world_from_cam, p.pose.index) - anchors).norm(), &out.frame_local);
-    Add((residual(interpolated, p.pose.index) - anchors).norm(), &out.frame_baseline_local);
+    Add((residual(p.pose.world_from_cam, p.pose.index) - anchors).norm(), &out.frame_local,
+        rel_rot_error_deg(before->world_from_cam, before->index, p.pose.world_from_cam,
+                          p.pose.index));
+    Add((residual(interpolated, p.pose.index) - anchors).norm(), &out.frame_baseline_local,
+        rel_rot_error_deg(before->world_from_cam, before->index, interpolated, p.pose.index));
   }
   for (PositionErrorStats* s : {&out.anchor, &out.frame, &out.interpolated, &out.frame_baseline,
                                 &out.all, &out.frame_local, &out.frame_baseline_local}) {

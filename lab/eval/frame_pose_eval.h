@@ -16,6 +16,9 @@ namespace slapse {
 struct PositionErrorStats {
   int poses = 0;
   double rmse_m = 0.0, max_m = 0.0;
+  // Local stats only: RMSE of the error of the rotation from the frame's
+  // earlier anchor to the frame (estimated against true), deg.
+  double rot_rmse_deg = 0.0;
 };
 
 struct FramePoseErrors {
