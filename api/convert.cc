@@ -82,6 +82,7 @@ v1::PipelineOptions PipelineOptionsToProto(const PipelineOptions& o) {
   v1::PipelineOptions out;
   out.set_eps_h_px(o.extraction.eps_h_px);
   out.set_scale_source(ScaleSourceToProto(o.scale.source));
+  out.set_anchors_only(!o.frame_poses.enabled);
   switch (o.scale.source) {
     case ScaleOptions::Source::kFirstStep:
       out.set_first_step_m(o.scale.first_step_m);
@@ -102,6 +103,7 @@ PipelineOptions PipelineOptionsFromProto(const v1::PipelineOptions& p) {
   PipelineOptions o;
   // 0 = the default: PlaneExtractionOptions' own.
   if (p.eps_h_px() > 0) o.extraction.eps_h_px = p.eps_h_px();
+  o.frame_poses.enabled = !p.anchors_only();
   o.scale.source = ScaleSourceFromProto(p.scale_source());
   switch (o.scale.source) {
     case ScaleOptions::Source::kFirstStep:
@@ -164,6 +166,84 @@ std::vector<TimedPose> TrajectoryFromProto(const v1::Trajectory& trajectory) {
   std::vector<TimedPose> out;
   out.reserve(trajectory.points_size());
   for (const v1::Trajectory::Point& p : trajectory.points()) out.push_back(TimedPoseFromProto(p));
+  return out;
+}
+
+v1::PoseQuality PoseQualityToProto(const PoseQuality& q) {
+  v1::PoseQuality out;
+  // PoseKind and PoseQuality.Kind share their values.
+  out.set_kind(static_cast<v1::PoseQuality::Kind>(static_cast<int>(q.kind)));
+  out.set_position_sigma(q.position_sigma);
+  out.set_inliers(q.inliers);
+  out.set_rms_px(q.rms_px);
+  out.set_gap_frames(q.gap_frames);
+  out.set_note(q.note);
+  return out;
+}
+
+PoseQuality PoseQualityFromProto(const v1::PoseQuality& q) {
+  PoseQuality out;
+  switch (q.kind()) {
+    case v1::PoseQuality::FRAME:
+      out.kind = PoseKind::kFrame;
+      break;
+    case v1::PoseQuality::INTERPOLATED:
+      out.kind = PoseKind::kInterpolated;
+      break;
+    case v1::PoseQuality::COASTING:
+      out.kind = PoseKind::kCoasting;
+      break;
+    default:  // ANCHOR, and a point of a server without per-frame poses
+      out.kind = PoseKind::kAnchor;
+      break;
+  }
+  out.position_sigma = q.position_sigma();
+  out.inliers = q.inliers();
+  out.rms_px = q.rms_px();
+  out.gap_frames = q.gap_frames();
+  out.note = q.note();
+  return out;
+}
+
+v1::FramePose FramePoseToProto(const FramePose& p) {
+  v1::FramePose out;
+  out.set_frame_index(p.pose.index);
+  out.set_timestamp_s(p.pose.timestamp_s);
+  *out.mutable_world_from_cam() = PoseToProto(p.pose.world_from_cam);
+  *out.mutable_quality() = PoseQualityToProto(p.quality);
+  out.set_revision(p.revision);
+  return out;
+}
+
+FramePose FramePoseFromProto(const v1::FramePose& p) {
+  FramePose out;
+  out.pose.index = p.frame_index();
+  out.pose.timestamp_s = p.timestamp_s();
+  out.pose.world_from_cam = PoseFromProto(p.world_from_cam());
+  out.quality = PoseQualityFromProto(p.quality());
+  out.revision = p.revision();
+  return out;
+}
+
+v1::Trajectory::Point FramePoseToPoint(const FramePose& p) {
+  v1::Trajectory::Point out = TimedPoseToProto(p.pose);
+  *out.mutable_quality() = PoseQualityToProto(p.quality);
+  out.set_revision(p.revision);
+  return out;
+}
+
+FramePose FramePoseFromPoint(const v1::Trajectory::Point& point) {
+  FramePose out;
+  out.pose = TimedPoseFromProto(point);
+  out.quality = PoseQualityFromProto(point.quality());
+  out.revision = point.revision();
+  return out;
+}
+
+std::vector<FramePose> FramePosesFromProto(const v1::Trajectory& trajectory) {
+  std::vector<FramePose> out;
+  out.reserve(trajectory.points_size());
+  for (const v1::Trajectory::Point& p : trajectory.points()) out.push_back(FramePoseFromPoint(p));
   return out;
 }
 

@@ -32,7 +32,8 @@ Rigid3d PoseFromProto(const v1::Pose& pose);
 v1::Vec3 Vec3ToProto(const Eigen::Vector3d& v);
 Eigen::Vector3d Vec3FromProto(const v1::Vec3& v);
 
-// Pipeline options: eps_h_px and the scale source with its one parameter.
+// Pipeline options: eps_h_px, the scale source with its one parameter, and
+// whether the frames between anchors are posed (anchors_only).
 v1::PipelineOptions PipelineOptionsToProto(const PipelineOptions& options);
 PipelineOptions PipelineOptionsFromProto(const v1::PipelineOptions& options);
 v1::PipelineOptions::ScaleSource ScaleSourceToProto(ScaleOptions::Source source);
@@ -51,6 +52,18 @@ v1::StreamReport StreamReportToProto(const StreamInfo& info, const ReadStats& st
 v1::Trajectory::Point TimedPoseToProto(const TimedPose& point);
 TimedPose TimedPoseFromProto(const v1::Trajectory::Point& point);
 std::vector<TimedPose> TrajectoryFromProto(const v1::Trajectory& trajectory);
+
+// Per-frame poses and their quality (core/pipeline/frame_poses.h). A
+// Trajectory point carries a FramePose's index, time, pose, quality and
+// revision; FramePosesFromProto gives a GetTrajectory snapshot as
+// Pipeline::poses() holds it.
+v1::PoseQuality PoseQualityToProto(const PoseQuality& quality);
+PoseQuality PoseQualityFromProto(const v1::PoseQuality& quality);
+v1::FramePose FramePoseToProto(const FramePose& pose);
+FramePose FramePoseFromProto(const v1::FramePose& pose);
+v1::Trajectory::Point FramePoseToPoint(const FramePose& pose);
+FramePose FramePoseFromPoint(const v1::Trajectory::Point& point);
+std::vector<FramePose> FramePosesFromProto(const v1::Trajectory& trajectory);
 
 // Plane map: one plane, and a GetPlaneMap snapshot by track id. The wire
 // carries neither seen_indices, pi_cam, mb_indices nor support_world (nor the

@@ -304,17 +304,25 @@ void SessionRunner::ApplyUpdatesLocked(const StepUpdates& u, std::vector<v1::Ses
     step->replace_planes = true;
     s.points -= segment_points_;
     segment_points_ = 0;
+    last_point_index_ = -1;  // every pose comes again
     for (const auto& [id, mp] : *u.plane_map) {
       step->planes.push_back(api::MapPlaneToProto(mp));
       step->planes.back().set_segment(s.segment);
     }
   }
-  for (const TimedPose& p : u.new_points) {
-    step->points.push_back(api::TimedPoseToProto(p));
+  // The trajectory snapshot holds every posed frame (Pipeline::poses()): a
+  // pose of a frame already stored is a revision and replaces it in place
+  // (Store::CommitStep updates the row of the same segment and frame index);
+  // new frames come in display order after the last one stored.
+  for (const FramePose& p : u.frame_poses) {
+    step->points.push_back(api::FramePoseToPoint(p));
     step->points.back().set_segment(s.segment);
+    if (p.pose.index > last_point_index_) {
+      last_point_index_ = p.pose.index;
+      ++s.points;
+      ++segment_points_;
+    }
   }
-  s.points += static_cast<int64_t>(u.new_points.size());
-  segment_points_ += static_cast<int64_t>(u.new_points.size());
 
   v1::SessionEvent pose;
   v1::PoseUpdate* pu = pose.mutable_pose();
@@ -324,6 +332,8 @@ void SessionRunner::ApplyUpdatesLocked(const StepUpdates& u, std::vector<v1::Ses
   pu->set_tracking(u.pose.tracking);
   pu->set_metric(u.pose.metric);
   pu->set_note(u.pose.note);
+  if (u.pose.tracking) *pu->mutable_quality() = api::PoseQualityToProto(u.pose.quality);
+  for (const FramePose& p : u.frame_poses) *pu->add_frame_poses() = api::FramePoseToProto(p);
   auto r = received_.find(u.pose.anchor_index);
   if (r != received_.end()) *pu->mutable_frame_received_time() = r->second;
   received_.erase(received_.begin(), received_.upper_bound(u.pose.anchor_index));

@@ -27,6 +27,8 @@ CREATE TABLE IF NOT EXISTS points(
   ordinal INTEGER NOT NULL, n INTEGER NOT NULL, segment INTEGER NOT NULL,
   anchor_index INTEGER NOT NULL, timestamp_s REAL NOT NULL, data BLOB NOT NULL,
   PRIMARY KEY(ordinal, n)) WITHOUT ROWID;
+-- A revised pose finds the row of its frame (CommitStep).
+CREATE INDEX IF NOT EXISTS points_by_frame ON points(ordinal, segment, anchor_index);
 CREATE TABLE IF NOT EXISTS planes(
   ordinal INTEGER NOT NULL, segment INTEGER NOT NULL, track_id INTEGER NOT NULL,
   data BLOB NOT NULL,
@@ -190,7 +192,21 @@ Status Store::CommitLocked(int64_t ordinal, const StoreStep& step,
     sqlite3_bind_int(st, 2, step.segment);
     SLAPSE_RETURN_IF_ERROR(run(st, "replace"));
   }
+  // A point of a frame the segment already holds is a revision of its pose:
+  // it replaces that row in place (same n, so pages keep display order);
+  // others are appended.
   for (const auto& p : step.points) {
+    sqlite3_stmt* up = Prepare(
+        "UPDATE points SET timestamp_s = ?4, data = ?5 WHERE ordinal = ?1 AND segment = ?2 AND "
+        "anchor_index = ?3");
+    if (up == nullptr) return Error("prepare");
+    sqlite3_bind_int64(up, 1, ordinal);
+    sqlite3_bind_int(up, 2, step.segment);
+    sqlite3_bind_int64(up, 3, p.anchor_index());
+    sqlite3_bind_double(up, 4, p.timestamp_s());
+    BindBlob(up, 5, Serialize(p));
+    SLAPSE_RETURN_IF_ERROR(run(up, "revise point"));
+    if (sqlite3_changes(db_) > 0) continue;
     sqlite3_stmt* st = Prepare(
         "INSERT INTO points(ordinal, n, segment, anchor_index, timestamp_s, data) VALUES(?1, "
         "(SELECT IFNULL(MAX(n), 0) + 1 FROM points WHERE ordinal = ?1), ?2, ?3, ?4, ?5)");

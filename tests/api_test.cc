@@ -28,6 +28,8 @@ void ExpectSameCarried(const PipelineOptions& a, const PipelineOptions& b) {
   EXPECT_EQ(a.scale.camera_height_m, b.scale.camera_height_m);
   EXPECT_EQ(a.scale.road_min_observations, b.scale.road_min_observations);
   EXPECT_EQ(a.min_planes_to_initialise, b.min_planes_to_initialise);
+  EXPECT_EQ(a.frame_poses.enabled, b.frame_poses.enabled);
+  EXPECT_EQ(a.frame_poses.estimator.min_inliers, b.frame_poses.estimator.min_inliers);
 }
 
 // core -> proto -> core equals, and proto -> core -> proto equals.
@@ -44,6 +46,14 @@ TEST(PipelineOptionsRoundTrip, Defaults) {
   ExpectRoundTrips(PipelineOptions{});
   // An empty message is the defaults (eps_h_px 0 = PlaneExtractionOptions').
   ExpectSameCarried(api::PipelineOptionsFromProto(v1::PipelineOptions{}), PipelineOptions{});
+}
+
+TEST(PipelineOptionsRoundTrip, AnchorsOnly) {
+  PipelineOptions o;
+  EXPECT_FALSE(api::PipelineOptionsToProto(o).anchors_only());  // frames posed by default
+  o.frame_poses.enabled = false;
+  ExpectRoundTrips(o);
+  EXPECT_TRUE(api::PipelineOptionsToProto(o).anchors_only());
 }
 
 TEST(PipelineOptionsRoundTrip, EpsHPx) {

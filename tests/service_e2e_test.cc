@@ -30,7 +30,8 @@ using server::SlapseServer;
 // What `slapse run` computes for a file, with a session's default options.
 struct OfflineResult {
   int64_t frames = 0;
-  std::vector<TimedPose> trajectory;
+  std::vector<TimedPose> trajectory;  // every posed frame (Pipeline::poses())
+  std::vector<FramePose> poses;
   std::map<int, MapPlane> planes;
   bool metric = false;
 };
@@ -52,7 +53,8 @@ StatusOr<OfflineResult> RunOffline(const testing::TestDrive& drive) {
     ++out.frames;
   }
   if (end.code() != StatusCode::kOutOfRange) return end;
-  out.trajectory = pipeline.trajectory();
+  out.poses = pipeline.poses();
+  out.trajectory = TimedPosesOf(out.poses);
   out.planes = pipeline.plane_map();
   out.metric = pipeline.metric();
   return out;
@@ -154,6 +156,10 @@ void ExpectSameResults(const OfflineResult& offline, const ServedResult& served)
             Written([&](std::ostream& o) { WriteTrajectoryTum(offline.trajectory, o); }));
   EXPECT_EQ(Written([&](std::ostream& o) { WriteTrajectoryKitti(served_traj, o); }),
             Written([&](std::ostream& o) { WriteTrajectoryKitti(offline.trajectory, o); }));
+  EXPECT_EQ(Written([&](std::ostream& o) {
+              WritePoseQualityCsv(api::FramePosesFromProto(served.trajectory), o);
+            }),
+            Written([&](std::ostream& o) { WritePoseQualityCsv(offline.poses, o); }));
   ResultJsonOptions json;
   json.seen_at_frames = false;  // not kept by a server
   EXPECT_EQ(

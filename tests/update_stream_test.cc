@@ -4,9 +4,12 @@
 // for one it dropped (in that order, ascending ids); and a consumer that only
 // applies the updates (as the server's snapshots do) holds exactly the
 // pipeline's trajectory and plane map after every step, also across the
-// step where the metric scale gets fixed and everything is rescaled.
+// step where the metric scale gets fixed and everything is rescaled; the same
+// for the all-frames poses (Pipeline::poses(): added, or replaced by a later
+// revision of the same frame index).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <map>
 #include <set>
 #include <vector>
@@ -22,6 +25,7 @@ namespace {
 // What a consumer of the updates holds: the server's snapshots, in core types.
 struct Mirror {
   std::vector<TimedPose> trajectory;
+  std::vector<FramePose> poses;  // by ascending frame index
   std::map<int, MapPlane> planes;
   std::set<int> live;
   bool metric = false;
@@ -82,12 +86,27 @@ void CheckAndApply(const Pipeline& pipeline, const PipelineStep& step, const Ste
     EXPECT_NE(u.metric, m->metric);
     ASSERT_NE(u.plane_map, nullptr);
     m->trajectory.clear();
+    m->poses.clear();
     m->planes = *u.plane_map;
   } else {
     EXPECT_EQ(u.metric, m->metric);
   }
   m->metric = u.metric;
   for (const TimedPose& p : u.new_points) m->trajectory.push_back(p);
+  for (const FramePose& p : u.frame_poses) {
+    auto it =
+        std::lower_bound(m->poses.begin(), m->poses.end(), p.pose.index,
+                         [](const FramePose& q, int64_t index) { return q.pose.index < index; });
+    if (it != m->poses.end() && it->pose.index == p.pose.index) {
+      EXPECT_GT(p.revision, it->revision) << "frame " << p.pose.index;
+      *it = p;
+    } else {
+      EXPECT_TRUE(it == m->poses.end()) << "frame " << p.pose.index << " out of order";
+      m->poses.push_back(p);
+    }
+  }
+  // Without revisions the new poses are the step's own.
+  if (!u.rescaled) EXPECT_EQ(u.frame_poses.size(), step.frame_poses.size());
   for (const PlaneChange& c : u.planes) m->planes[c.track_id] = *c.plane;
 }
 
@@ -100,6 +119,15 @@ void ExpectMirrorsPipeline(const Mirror& m, const Pipeline& pipeline) {
     EXPECT_EQ(m.trajectory[i].world_from_cam.translation, traj[i].world_from_cam.translation);
     EXPECT_EQ(m.trajectory[i].world_from_cam.rotation.coeffs(),
               traj[i].world_from_cam.rotation.coeffs());
+  }
+  const auto& poses = pipeline.poses();
+  ASSERT_EQ(m.poses.size(), poses.size());
+  for (size_t i = 0; i < poses.size(); ++i) {
+    EXPECT_EQ(m.poses[i].pose.index, poses[i].pose.index);
+    EXPECT_EQ(m.poses[i].pose.timestamp_s, poses[i].pose.timestamp_s);
+    EXPECT_EQ(m.poses[i].pose.world_from_cam.translation, poses[i].pose.world_from_cam.translation);
+    EXPECT_EQ(m.poses[i].quality.kind, poses[i].quality.kind);
+    EXPECT_EQ(m.poses[i].revision, poses[i].revision);
   }
   ASSERT_EQ(m.planes.size(), pipeline.plane_map().size());
   for (const auto& [id, p] : pipeline.plane_map()) {

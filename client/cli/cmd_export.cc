@@ -18,6 +18,7 @@ namespace {
 const char* DefaultFileName(const std::string& format) {
   if (format == "tum") return "trajectory_tum.txt";
   if (format == "kitti") return "trajectory_kitti.txt";
+  if (format == "quality") return "trajectory_quality.csv";
   return "session.json";
 }
 
@@ -33,12 +34,13 @@ int RunExport(int argc, char** argv) {
   AddServerFlag(&cl, &server);
   app.add_option("--format", format,
                  "tum or kitti (trajectory, as run's trajectory_*.txt), json (trajectory + planes, "
-                 "run's planes.json schema)")
+                 "run's planes.json schema), quality (one row per pose, as run's "
+                 "trajectory_quality.csv)")
       ->type_name("FMT")
       ->capture_default_str();
   app.add_option("--out", out,
                  "file to write, '-' for stdout, or a directory (gets trajectory_tum.txt, "
-                 "trajectory_kitti.txt or session.json)")
+                 "trajectory_kitti.txt, trajectory_quality.csv or session.json)")
       ->type_name("PATH")
       ->capture_default_str();
   if (int rc = cl.Parse(argc, argv); rc >= 0) return rc;
@@ -46,8 +48,8 @@ int RunExport(int argc, char** argv) {
     return Fail("export",
                 "expected one SESSION, e.g. sessions/3k7q... as create printed it (see --help)", 2);
   }
-  if (format != "tum" && format != "kitti" && format != "json") {
-    return Fail("export", "--format must be tum, kitti or json, not '" + format + "'", 2);
+  if (format != "tum" && format != "kitti" && format != "json" && format != "quality") {
+    return Fail("export", "--format must be tum, kitti, json or quality, not '" + format + "'", 2);
   }
   std::error_code ec;
   if (out != "-" && std::filesystem::is_directory(out, ec)) {
@@ -69,12 +71,14 @@ int RunExport(int argc, char** argv) {
     plane_map = std::move(*got);
   }
 
-  const auto traj = api::TrajectoryFromProto(*trajectory);  // as Pipeline::trajectory()
+  const auto traj = api::TrajectoryFromProto(*trajectory);  // as Pipeline::poses()
   auto write = [&](std::ostream& os) {
     if (format == "tum") {
       WriteTrajectoryTum(traj, os);
     } else if (format == "kitti") {
       WriteTrajectoryKitti(traj, os);
+    } else if (format == "quality") {
+      WritePoseQualityCsv(api::FramePosesFromProto(*trajectory), os);
     } else {
       ResultJsonOptions o;
       o.seen_at_frames = false;  // a server's plane map does not keep them

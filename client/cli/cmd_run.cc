@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
+#include <map>
 #include <memory>
 
 #include <opencv2/imgcodecs.hpp>
@@ -16,6 +17,7 @@
 #include "core/mv/mv_reader.h"
 #include "core/pipeline/pipeline.h"
 #include "core/pipeline/result_io.h"
+#include "lab/eval/frame_pose_eval.h"
 #include "lab/eval/plane_map_eval.h"
 #include "lab/eval/trajectory_eval.h"
 #include "lab/gt/ground_truth.h"
@@ -25,12 +27,17 @@
 namespace slapse::cli {
 namespace {
 
+// The trajectory files hold every posed frame (Pipeline::poses()), the
+// quality CSV one row per line of the TUM file.
 Status WriteResults(const Pipeline& pipeline, const std::string& dir) {
-  const auto& traj = pipeline.trajectory();
+  const std::vector<TimedPose> traj = TimedPosesOf(pipeline.poses());
   SLAPSE_RETURN_IF_ERROR(WriteResultFile(
       dir + "/trajectory_tum.txt", [&](std::ostream& out) { WriteTrajectoryTum(traj, out); }));
   SLAPSE_RETURN_IF_ERROR(WriteResultFile(
       dir + "/trajectory_kitti.txt", [&](std::ostream& out) { WriteTrajectoryKitti(traj, out); }));
+  SLAPSE_RETURN_IF_ERROR(WriteResultFile(dir + "/trajectory_quality.csv", [&](std::ostream& out) {
+    WritePoseQualityCsv(pipeline.poses(), out);
+  }));
   return WriteResultFile(dir + "/planes.json", [&](std::ostream& out) {
     WriteResultJson(pipeline.plane_map(), pipeline.metric(), ResultJsonOptions{}, out);
   });
@@ -89,6 +96,22 @@ void DrawTruth(const GroundTruth& gt, const std::vector<TimedPose>& truth, TopDo
   }
 }
 
+// Per-frame poses by kind, in the anchors' alignment (lab/eval/frame_pose_eval.h).
+void PrintFramePoseErrors(const std::vector<FramePose>& poses,
+                          const std::vector<TimedPose>& truth) {
+  auto e = EvaluateFramePoses(poses, truth);
+  if (!e.ok()) return;
+  auto row = [](const char* name, const PositionErrorStats& s) {
+    std::printf("  %-13s %5d poses  RMSE %.3f m  max %.3f m\n", name, s.poses, s.rmse_m, s.max_m);
+  };
+  std::printf("per-frame  position errors in the anchors' Sim(3) alignment:\n");
+  row("anchors", e->anchor);
+  row("frames", e->frame);
+  row("(interp.)", e->frame_baseline);
+  row("interpolated", e->interpolated);
+  row("all", e->all);
+}
+
 void PrintErrors(const TrajectoryErrors& terr, const StatusOr<PlaneMapErrors>& perr) {
   std::printf("distance   %.1f m over %d poses\n", terr.distance_m, terr.poses);
   std::printf("eps_D      %.2f %%   (paper: mean relative position error, first-step scale)\n",
@@ -141,6 +164,7 @@ void MapAndErrors(const Pipeline& pipeline, const std::optional<GroundTruth>& gt
   cv::imwrite(out_dir + "/map.png", plot.Render(900, 900, "trajectory and plane map", unit));
   if (terr.has_value()) {
     PrintErrors(*terr, EvaluatePlaneMap(plane_estimates, *gt, terr->first_step_scale));
+    PrintFramePoseErrors(pipeline.poses(), TruthPoses(*gt));
   }
 }
 
@@ -187,6 +211,9 @@ int RunRun(int argc, char** argv) {
   app.add_flag("--no-reencode", no_reencode,
                "refuse a codec without motion vectors (HEVC, VP9, AV1, MJPEG, ...) instead of "
                "re-encoding it in-process");
+  bool anchors_only = !po.frame_poses.enabled;
+  app.add_flag("--anchors-only", anchors_only,
+               "pose the anchor frames only (default: every frame between tracked anchors too)");
   if (int rc = cl.Parse(argc, argv); rc >= 0) return rc;
   if (cl.positional().size() != 1) return Fail("run", "expected one INPUT (see --help)", 2);
   const std::string input = cl.positional()[0];
@@ -196,6 +223,7 @@ int RunRun(int argc, char** argv) {
   auto scale = scale_flags.Options();
   if (!scale.ok()) return Fail("run", scale.status().message(), 2);
   po.scale = *scale;
+  po.frame_poses.enabled = !anchors_only;
 
   std::optional<GroundTruth> gt;
   if (cl.Has("gt")) {
@@ -251,9 +279,14 @@ int RunRun(int argc, char** argv) {
   std::printf("input      %s (%s, %dx%d, %lld frames)\n", input.c_str(), info.codec_name.c_str(),
               info.width_px, info.height_px, static_cast<long long>((*reader)->stats().frames));
   PrintStreamReport(info, (*reader)->stats());
-  std::printf("tracked    %d of %d anchor pairs, %zu poses, %zu planes in the map (%s)\n", tracked,
-              steps, pipeline.trajectory().size(), pipeline.plane_map().size(),
+  std::printf("tracked    %d of %d anchor pairs, %zu anchor poses, %zu planes in the map (%s)\n",
+              tracked, steps, pipeline.trajectory().size(), pipeline.plane_map().size(),
               pipeline.metric() ? "metres" : "up to scale: first step = 1");
+  std::map<PoseKind, int> kinds;
+  for (const FramePose& p : pipeline.poses()) ++kinds[p.quality.kind];
+  std::printf("poses      %zu frames posed: %d anchor, %d coasting, %d frame, %d interpolated\n",
+              pipeline.poses().size(), kinds[PoseKind::kAnchor], kinds[PoseKind::kCoasting],
+              kinds[PoseKind::kFrame], kinds[PoseKind::kInterpolated]);
 
   if (pipeline.trajectory().empty()) {
     // Never a silent empty result: say why (a still camera, a stream too short or too small).
@@ -264,8 +297,10 @@ int RunRun(int argc, char** argv) {
                                  .c_str());
   }
   MapAndErrors(pipeline, gt, plane_estimates, out_dir);
-  std::printf("wrote      %s/{trajectory_tum.txt, trajectory_kitti.txt, planes.json, map.png}\n",
-              out_dir.c_str());
+  std::printf(
+      "wrote      %s/{trajectory_tum.txt, trajectory_kitti.txt, trajectory_quality.csv, "
+      "planes.json, map.png}\n",
+      out_dir.c_str());
   return stream_ok ? 0 : 1;
 }
 

@@ -410,6 +410,9 @@ int RunCreate(int argc, char** argv) {
   app.add_flag("--no-reencode", no_reencode,
                "FAIL a stream whose codec has no motion vectors (HEVC, VP9, AV1, MJPEG, ...) "
                "instead of re-encoding it in-process");
+  bool anchors_only = !PipelineOptions{}.frame_poses.enabled;
+  app.add_flag("--anchors-only", anchors_only,
+               "pose the anchor frames only (default: every frame between tracked anchors too)");
   if (int rc = ParseOrExit(cl, argc, argv, 0); rc >= 0) return rc;
   v1::Session request;
   if (Status s = SetSource(cl, source, &request); !s.ok()) return Fail("create", s.message(), 2);
@@ -436,6 +439,7 @@ int RunCreate(int argc, char** argv) {
   PipelineOptions options;
   options.extraction.eps_h_px = eps_h_px;
   options.scale = *scale;
+  options.frame_poses.enabled = !anchors_only;
   *request.mutable_pipeline_options() = api::PipelineOptionsToProto(options);
   stream_options.reencode = !no_reencode;
   *request.mutable_stream_options() = api::StreamOptionsToProto(stream_options);

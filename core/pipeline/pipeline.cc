@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <utility>
 
 #include "core/common/plane.h"
@@ -37,7 +38,8 @@ Pipeline::Pipeline(const Intrinsics& intrinsics, double sigma_px, PipelineOption
     : intrinsics_(intrinsics),
       options_(options),
       front_end_(intrinsics, sigma_px, options),
-      ekf_(intrinsics, options.ekf) {}
+      ekf_(intrinsics, options.ekf),
+      frame_poser_(intrinsics, sigma_px, options.frame_poses) {}
 
 StatusOr<std::optional<PipelineStep>> Pipeline::Push(const FrameRecord& frame) {
   if (frame.index <= last_index_) {
@@ -46,6 +48,7 @@ StatusOr<std::optional<PipelineStep>> Pipeline::Push(const FrameRecord& frame) {
                                 ": frames must come in display order");
   }
   last_index_ = frame.index;
+  frame_poser_.Buffer(frame);
   std::optional<FrontEndStep> front = front_end_.Push(frame);
   if (!front.has_value()) return std::optional<PipelineStep>();
   return std::optional<PipelineStep>(Process(*front));
@@ -53,6 +56,7 @@ StatusOr<std::optional<PipelineStep>> Pipeline::Push(const FrameRecord& frame) {
 
 void Pipeline::Break() {
   front_end_.Reset();
+  frame_poser_.Reset();
   ekf_ = PlaneEkf(intrinsics_, options_.ekf);
 }
 
@@ -91,7 +95,13 @@ PipelineStep Pipeline::Process(const FrontEndStep& front) {
     }
     step.world_from_cam = world_from_cam_;
     step.planes = ekf_.planes();
+    const auto t1 = std::chrono::steady_clock::now();
+    AddFramePoses(pair, &step);
+    step.times.frame_poses_ms = MsSince(t1);
+  } else {
+    frame_poser_.Skip(pair.later_index);
   }
+  first_revisable_pose_ = poses_.size();
   step.metric = metric_;
   return step;
 }
@@ -206,12 +216,60 @@ void Pipeline::MaybeFixScaleFromRoad() {
 void Pipeline::ApplyScale(double s) {
   ekf_.Rescale(s);
   for (TimedPose& p : trajectory_) p.world_from_cam.translation *= s;
+  for (FramePose& p : poses_) {
+    p.pose.world_from_cam.translation *= s;
+    p.quality.position_sigma *= s;
+  }
   world_from_cam_.translation *= s;
   for (auto& [id, mp] : plane_map_) {
     mp.distance_m *= s;
     mp.pi_cam /= s;
     for (Eigen::Vector3d& x : mp.support_world) x *= s;
   }
+}
+
+PoseQuality Pipeline::AnchorQuality(const PipelineStep& step) const {
+  PoseQuality q;
+  q.kind = step.ekf.skipped ? PoseKind::kCoasting : PoseKind::kAnchor;
+  if (step.ekf.skipped) q.note = "no tracked plane observed: the motion model's prediction";
+  // The step translation's covariance (error state [dtheta, dt, ...]).
+  const Eigen::MatrixXd& P = ekf_.covariance();
+  q.position_sigma = P.rows() >= 6 ? std::sqrt(std::max(0.0, P.block<3, 3>(3, 3).trace())) : 0.0;
+  q.inliers = step.ekf.measurements;
+  q.rms_px = step.ekf.rms_residual_px;
+  return q;
+}
+
+void Pipeline::AddFramePoses(const AnchorPair& pair, PipelineStep* step) {
+  // Tracking: trajectory_ ends with the later anchor, after the earlier one.
+  const TimedPose& later = trajectory_.back();
+  const TimedPose& earlier = trajectory_[trajectory_.size() - 2];
+  const int64_t last_posed = poses_.empty() ? -1 : poses_.back().pose.index;
+  if (last_posed != earlier.index) {  // the trajectory (re)starts on the earlier anchor
+    FramePose start;
+    start.pose = earlier;
+    start.quality.position_sigma = std::numeric_limits<double>::quiet_NaN();
+    if (last_posed >= 0) {
+      start.quality.gap_frames = earlier.index - last_posed - 1;
+      start.quality.note = "re-initialised after a loss: continues from the last pose";
+    } else {
+      start.quality.note = "first pose: the world frame";
+    }
+    step->frame_poses.push_back(start);
+  }
+  PosedAnchorPair posed;
+  posed.pair = &pair;
+  posed.earlier = earlier;
+  posed.later = later;
+  posed.extracted = &step->extracted;
+  posed.extracted_filter_ids = &step->extracted_filter_ids;
+  posed.planes = &step->planes;
+  for (FramePose& fp : frame_poser_.PoseBetween(posed)) step->frame_poses.push_back(std::move(fp));
+  FramePose anchor;
+  anchor.pose = later;
+  anchor.quality = AnchorQuality(*step);
+  step->frame_poses.push_back(anchor);
+  poses_.insert(poses_.end(), step->frame_poses.begin(), step->frame_poses.end());
 }
 
 }  // namespace slapse

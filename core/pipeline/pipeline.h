@@ -22,6 +22,7 @@
 #include "core/ekf/plane_ekf.h"
 #include "core/merge/mv_merge.h"
 #include "core/mv/frame_record.h"
+#include "core/pipeline/frame_poses.h"
 #include "core/pipeline/front_end.h"
 #include "core/planes/infinity.h"
 #include "core/planes/plane_extraction.h"
@@ -52,6 +53,8 @@ struct PipelineOptions : FrontEndOptions {
   ScaleOptions scale;
   // Initialise only on a pair with motion and at least this many planes.
   int min_planes_to_initialise = 1;
+  // Poses of the frames between anchors (core/pipeline/frame_poses.h).
+  FramePoserOptions frame_poses;
 };
 
 // A plane as the map holds it: world frame, with its history.
@@ -72,6 +75,7 @@ struct MapPlane {
 // Wall-clock cost of each stage for one anchor pair, milliseconds.
 struct StageTimes : FrontEndTimes {
   double ekf_ms = 0;
+  double frame_poses_ms = 0;  // posing the frames between the anchors
 };
 
 struct PipelineStep {
@@ -96,6 +100,10 @@ struct PipelineStep {
   UpdateReport ekf;
   StageTimes times;
   std::string note;  // why the step did not track, if it did not
+  // The all-frames poses this step added, in display order: when tracking,
+  // the frames between the anchors and the later anchor (and the earlier
+  // anchor when the trajectory (re)starts on it); see Pipeline::poses().
+  std::vector<FramePose> frame_poses;
 };
 
 class Pipeline {
@@ -116,7 +124,15 @@ class Pipeline {
   // Later frames still need larger indices and timestamps.
   void Break();
 
+  // The anchors' poses (one per tracked anchor).
   const std::vector<TimedPose>& trajectory() const { return trajectory_; }
+  // Every posed frame in display order, anchors included, with its quality
+  // (the trajectory `run` writes and the service reports).
+  const std::vector<FramePose>& poses() const { return poses_; }
+  // poses()[i] for i >= this may still be revised by later steps (the
+  // revision counter of FramePose goes up); those before are final. With the
+  // filter alone nothing is revised: it is poses().size() after each step.
+  size_t first_revisable_pose() const { return first_revisable_pose_; }
   // Every plane the filter ever held, by track id.
   const std::map<int, MapPlane>& plane_map() const { return plane_map_; }
   bool metric() const { return metric_; }
@@ -135,6 +151,10 @@ class Pipeline {
   void RecordPlanes(const PipelineStep& step, const AnchorPair& pair);
   void ApplyScale(double s);
   void MaybeFixScaleFromRoad();
+  // Appends the step's all-frames poses (the frames between its anchors, the
+  // later anchor, and the earlier one where the trajectory (re)starts).
+  void AddFramePoses(const AnchorPair& pair, PipelineStep* step);
+  PoseQuality AnchorQuality(const PipelineStep& step) const;
 
   Intrinsics intrinsics_;
   PipelineOptions options_;
@@ -145,6 +165,9 @@ class Pipeline {
   bool metric_ = false;
   std::vector<TimedPose> trajectory_;
   std::map<int, MapPlane> plane_map_;
+  FramePoser frame_poser_;
+  std::vector<FramePose> poses_;
+  size_t first_revisable_pose_ = 0;
 };
 
 }  // namespace slapse

@@ -35,6 +35,30 @@ void WriteTrajectoryKitti(const std::vector<TimedPose>& trajectory,
   }
 }
 
+std::vector<TimedPose> TimedPosesOf(const std::vector<FramePose>& poses) {
+  std::vector<TimedPose> out;
+  out.reserve(poses.size());
+  for (const FramePose& p : poses) out.push_back(p.pose);
+  return out;
+}
+
+void WritePoseQualityCsv(const std::vector<FramePose>& poses, std::ostream& out) {
+  out << "frame_index,timestamp_s,kind,position_sigma,inliers,rms_px,revision,gap_frames,note\n";
+  char line[200];
+  for (const FramePose& p : poses) {
+    const PoseQuality& q = p.quality;
+    std::snprintf(line, sizeof(line), "%lld,%.6f,%s,%.6g,%d,%.3f,%d,%lld,",
+                  static_cast<long long>(p.pose.index), p.pose.timestamp_s, PoseKindName(q.kind),
+                  q.position_sigma, q.inliers, q.rms_px, p.revision,
+                  static_cast<long long>(q.gap_frames));
+    std::string note = q.note;
+    for (char& c : note) {
+      if (c == '"' || c == '\n') c = '\'';
+    }
+    out << line << '"' << note << "\"\n";
+  }
+}
+
 namespace {
 
 // planes.json's numbers have always had fixed decimals by member: these keep

@@ -22,6 +22,17 @@ void WriteTrajectoryTum(const std::vector<TimedPose>& trajectory,
 void WriteTrajectoryKitti(const std::vector<TimedPose>& trajectory,
                           std::ostream& out);
 
+// The timed poses of an all-frames trajectory (Pipeline::poses()), for the
+// TUM and KITTI writers.
+std::vector<TimedPose> TimedPosesOf(const std::vector<FramePose>& poses);
+
+// trajectory_quality.csv, one row per pose in the order of the TUM file
+// written from the same poses (docs/TRAJECTORY.md "Per-frame poses"):
+//   frame_index,timestamp_s,kind,position_sigma,inliers,rms_px,revision,gap_frames,note
+// kind: ANCHOR | FRAME | INTERPOLATED | COASTING; position_sigma in the
+// trajectory's unit ("nan": none, see PoseQuality); note quoted.
+void WritePoseQualityCsv(const std::vector<FramePose>& poses, std::ostream& out);
+
 struct ResultJsonOptions {
   // Each plane's "seen_at_frames" (MapPlane::seen_indices); a server's plane
   // map does not keep them.

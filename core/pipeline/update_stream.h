@@ -10,6 +10,12 @@
 // The server converts these structs to its wire messages and transports them
 // (server/session_runner.cc); nothing here knows the wire format.
 //
+// Per-frame poses: every frame's pose (Pipeline::poses()) goes out once when
+// added; a pose the pipeline changes later (its revision counter goes up;
+// only poses at or after Pipeline::first_revisable_pose() can change) goes
+// out again with the new revision. Applying the updates in order gives
+// exactly Pipeline::poses().
+//
 // Thread-safety: none; one UpdateStream per Pipeline, fed in step order.
 #pragma once
 
@@ -33,6 +39,7 @@ struct PoseChange {
   bool tracking = false;  // the filter is running (pose and planes valid)
   bool metric = false;    // lengths are metres
   std::string note;       // why the step did not track, if it did not
+  PoseQuality quality;    // the anchor's, when tracking
 };
 
 // A filter plane that appeared, changed or went.
@@ -61,6 +68,13 @@ struct StepUpdates {
   bool metric = false;                                 // lengths are metres
   const std::map<int, MapPlane>* plane_map = nullptr;  // set when rescaled; as `plane`
   std::vector<TimedPose> new_points;  // trajectory points added since the last update
+
+  // The all-frames trajectory (Pipeline::poses()): the poses added or
+  // revised since the last update, in display order. A consumer appends a
+  // pose whose frame index it does not hold and replaces the one it holds
+  // by a pose of the same index (whose `revision` is then higher); on
+  // `rescaled` it drops them all first (they all come again).
+  std::vector<FramePose> frame_poses;
 };
 
 class UpdateStream {
@@ -69,8 +83,15 @@ class UpdateStream {
   StepUpdates Next(const Pipeline& pipeline, const PipelineStep& step);
 
  private:
+  // The poses of Pipeline::poses() added or revised since the last call.
+  void CollectFramePoses(const Pipeline& pipeline, std::vector<FramePose>* out);
+
   std::set<int> live_planes_;  // track ids the filter held after the previous step
   size_t points_sent_ = 0;     // trajectory points already in an update
+  // Pipeline::poses(): the revision sent of each pose sent, and where the
+  // poses that may have been revised since the last update begin.
+  std::vector<int> pose_revisions_sent_;
+  size_t revisable_from_ = 0;
   bool metric_ = false;        // the scale of what was sent
 };
 
