@@ -2,12 +2,15 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <set>
 #include <utility>
 
 #include <ceres/ceres.h>
 #include <ceres/rotation.h>
+
+#include "core/common/angles.h"
 
 namespace slapse {
 namespace {
@@ -17,24 +20,25 @@ using Vec3 = Eigen::Matrix<T, 3, 1>;
 template <typename T>
 using Mat3 = Eigen::Matrix<T, 3, 3>;
 
-// Plane-induced transfer of one macroblock (the header's residual). Parameter
-// blocks: earlier pose (q, c), later pose (q, c), the plane pi_r in the
-// window's oldest camera r (world_from_r = (R_wr, c_wr), constant data).
+// Plane-induced transfer of one plane's macroblocks in one pair (the
+// header's residual), one cost block per (pair, plane) so that the pose and
+// plane algebra is done once for all its macroblocks. Parameter blocks:
+// earlier pose (q, c), later pose (q, c), the plane pi_r in the window's
+// oldest camera r (world_from_r = (R_wr, c_wr), constant data).
 //   R = R_a^T R_b, t = R_a^T (c_b - c_a)                 (a_from_b)
 //   R_rb = R_wr^T R_b, t_rb = R_wr^T (c_b - c_wr)          (r_from_b)
 //   pi_b = R_rb^T pi_r / (1 - pi_r^T t_rb)
-//   X_a = R y + t (pi_b^T y),  y = K^-1 [x_b; 1]
-//   r = ([fx X_a.x / X_a.z + cx, fy X_a.y / X_a.z + cy] - x_a) / s
-struct TransferResidual {
-  TransferResidual(const Eigen::Vector3d& ray_later, const Eigen::Vector2d& x_earlier,
-                   const Intrinsics& k, double sigma_px, const Eigen::Matrix3d& R_wr,
-                   const Eigen::Vector3d& c_wr)
-      : ray(ray_later),
-        xe(x_earlier),
-        K(k),
-        inv_sigma(1.0 / sigma_px),
-        R_rw(R_wr.transpose()),
-        c_wr(c_wr) {}
+//   H = R + t pi_b^T;  X_a = H y,  y = K^-1 [x_b; 1]
+//   r_j = w_j ([fx X_a.x / X_a.z + cx, fy X_a.y / X_a.z + cy] - x_a) / s_j
+// w_j: the Huber weight sqrt(min(1, k / |r_j|)) of the macroblock's
+// normalised residual at the start of the solve (one IRLS step per solve;
+// the window is solved again at every anchor, so the weights follow).
+struct PlaneBlockResidual {
+  struct Mb {
+    Eigen::Vector3d ray;  // K^-1 [x_later; 1]
+    Eigen::Vector2d x_earlier;
+    double scale = 1.0;  // w / s
+  };
 
   template <typename T>
   bool operator()(const T* q_a, const T* c_a, const T* q_b, const T* c_b, const T* pi_r,
@@ -42,23 +46,23 @@ struct TransferResidual {
     const Eigen::Map<const Eigen::Quaternion<T>> qa(q_a), qb(q_b);
     const Eigen::Map<const Vec3<T>> ca(c_a), cb(c_b), pir(pi_r);
     const Mat3<T> Ra = qa.toRotationMatrix(), Rb = qb.toRotationMatrix();
-    const Mat3<T> R = Ra.transpose() * Rb;
     const Vec3<T> t = Ra.transpose() * (cb - ca);
     const Mat3<T> R_rb = R_rw.cast<T>() * Rb;
     const Vec3<T> t_rb = R_rw.cast<T>() * (cb - c_wr.cast<T>());
     const Vec3<T> pi_b = R_rb.transpose() * pir / (T(1.0) - pir.dot(t_rb));
-    const Vec3<T> y = ray.cast<T>();
-    const Vec3<T> X = R * y + t * pi_b.dot(y);
-    if (!(X.z() > T(1e-9))) return false;
-    residual[0] = (T(K.fx_px) * X.x() / X.z() + T(K.cx_px) - T(xe.x())) * T(inv_sigma);
-    residual[1] = (T(K.fy_px) * X.y() / X.z() + T(K.cy_px) - T(xe.y())) * T(inv_sigma);
+    const Mat3<T> H = Ra.transpose() * Rb + t * pi_b.transpose();
+    for (size_t j = 0; j < mbs.size(); ++j) {
+      const Vec3<T> X = H * mbs[j].ray.cast<T>();
+      if (!(X.z() > T(1e-9))) return false;
+      residual[2 * j] = (T(fx) * X.x() / X.z() + T(cx - mbs[j].x_earlier.x())) * T(mbs[j].scale);
+      residual[2 * j + 1] =
+          (T(fy) * X.y() / X.z() + T(cy - mbs[j].x_earlier.y())) * T(mbs[j].scale);
+    }
     return true;
   }
 
-  Eigen::Vector3d ray;
-  Eigen::Vector2d xe;
-  Intrinsics K;
-  double inv_sigma;
+  std::vector<Mb> mbs;
+  double fx = 0, fy = 0, cx = 0, cy = 0;
   Eigen::Matrix3d R_rw;
   Eigen::Vector3d c_wr;
 };
@@ -153,8 +157,42 @@ void WindowRefiner::Reset() {
   planes_world_.clear();
   plane_solves_.clear();
   road_id_ = -1;
+  next_internal_id_ = -2;
   fixed_road_height_.reset();
   before_.reset();
+}
+
+// A plane id whose new guess (the filter's plane) is a different surface from
+// the window's plane (the filter restarts a track that fails its association
+// gate under the same id): the window's plane and its older observations move
+// to a fresh internal id, and the id starts anew from the guess. Compared in
+// the newest camera, the normals' angle and the distances' ratio (the filter
+// is rescaled to the window at every step, so their scales agree).
+void WindowRefiner::Reassociate(int plane_id, const Eigen::Vector3d& guess_cam,
+                                const Rigid3d& world_from_cam) {
+  const auto it = planes_world_.find(plane_id);
+  if (it == planes_world_.end() || !(guess_cam.norm() > 0)) return;
+  const Plane3d old_cam = PlaneInCamera(world_from_cam, it->second, true);
+  const Plane3d new_cam = Plane3d::FromInverseDepth(guess_cam);
+  const double cos_angle = std::clamp(old_cam.normal.dot(new_cam.normal), -1.0, 1.0);
+  const double ratio = old_cam.distance > 0 ? new_cam.distance / old_cam.distance : 0.0;
+  if (std::acos(cos_angle) <= DegToRad(options_.reassociate_max_angle_deg) && ratio > 0 &&
+      std::abs(std::log(ratio)) <= std::log(options_.reassociate_max_distance_ratio)) {
+    return;
+  }
+  const int moved = next_internal_id_--;
+  planes_world_[moved] = it->second;
+  planes_world_.erase(it);
+  if (plane_solves_.count(plane_id)) {
+    plane_solves_[moved] = plane_solves_[plane_id];
+    plane_solves_.erase(plane_id);
+  }
+  for (Anchor& a : anchors_) {
+    for (WindowPlaneObservation& old : a.observations) {
+      if (old.plane_id == plane_id) old.plane_id = moved;
+    }
+  }
+  if (road_id_ == plane_id) road_id_ = moved;
 }
 
 void WindowRefiner::Push(int64_t index, double timestamp_s, const Rigid3d& world_from_cam,
@@ -166,8 +204,9 @@ void WindowRefiner::Push(int64_t index, double timestamp_s, const Rigid3d& world
   a.world_from_cam = world_from_cam;
   // Observations of planes the window neither holds nor gets a guess for are skipped.
   for (WindowPlaneObservation& o : observations) {
+    const auto guess = plane_guess_cam.find(o.plane_id);
+    if (guess != plane_guess_cam.end()) Reassociate(o.plane_id, guess->second, world_from_cam);
     if (planes_world_.count(o.plane_id) == 0) {
-      const auto guess = plane_guess_cam.find(o.plane_id);
       if (guess == plane_guess_cam.end() || !(guess->second.norm() > 0)) continue;
       planes_world_[o.plane_id] =
           TransformPlane(world_from_cam, Plane3d::FromInverseDepth(guess->second));
@@ -204,13 +243,11 @@ struct WindowRefiner::Problem {
   std::vector<PoseBlock> poses;        // [before (if any),] anchors oldest .. newest
   std::map<int, Eigen::Vector3d> pis;  // plane id -> pi in the oldest camera
   ceres::Problem problem;
-  std::unique_ptr<ceres::LossFunction> loss;
   std::unique_ptr<ceres::Manifold> quaternion;
   int residuals = 0;
 
   static ceres::Problem::Options Options() {
     ceres::Problem::Options o;
-    o.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
     o.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
     return o;
   }
@@ -233,7 +270,6 @@ Status WindowRefiner::Refine(WindowRefineReport* report) {
   rep.anchors = static_cast<int>(n);
   if (n < 2) return Status::Ok();
   Problem wp;
-  wp.loss = std::make_unique<ceres::HuberLoss>(options_.huber_k);
   wp.quaternion = std::make_unique<ceres::EigenQuaternionManifold>();
   const size_t first = before_ ? 1 : 0;  // index of anchor 0 in wp.poses
   wp.poses.reserve(n + 1);
@@ -291,8 +327,6 @@ void WindowRefiner::AddTransferResiduals(Problem* problem, size_t first,
                                          WindowRefineReport* rep) const {
   Problem& wp = *problem;
   const Eigen::Matrix3d K_inv = intrinsics_.K().inverse();
-  const Eigen::Matrix3d R_wr = anchors_[0].world_from_cam.R();
-  const Eigen::Vector3d c_wr = anchors_[0].world_from_cam.translation;
   for (size_t k = 1; k < anchors_.size(); ++k) {
     PoseBlock& a = wp.poses[first + k - 1];
     PoseBlock& b = wp.poses[first + k];
@@ -300,26 +334,46 @@ void WindowRefiner::AddTransferResiduals(Problem* problem, size_t first,
     for (const WindowPlaneObservation& o : anchors_[k].observations) {
       auto plane = wp.pis.find(o.plane_id);
       if (plane == wp.pis.end()) continue;
+      auto f = std::make_unique<PlaneBlockResidual>();
+      f->fx = intrinsics_.fx_px;
+      f->fy = intrinsics_.fy_px;
+      f->cx = intrinsics_.cx_px;
+      f->cy = intrinsics_.cy_px;
+      f->R_rw = anchors_[0].world_from_cam.R().transpose();
+      f->c_wr = anchors_[0].world_from_cam.translation;
       const size_t m = o.x_later_px.size();
       const size_t stride =
           std::max<size_t>(1, (m + options_.max_mbs_per_plane - 1) / options_.max_mbs_per_plane);
       for (size_t i = 0; i < m; i += stride) {
         const double sigma =
             std::sqrt(o.variance_px2[i] + options_.extra_sigma_px * options_.extra_sigma_px);
-        auto* f = new TransferResidual(K_inv * o.x_later_px[i].homogeneous(), o.x_earlier_px[i],
-                                       intrinsics_, sigma, R_wr, c_wr);
-        double r[2];
-        if (!(*f)(a.q.coeffs().data(), a.c.data(), b.q.coeffs().data(), b.c.data(),
-                  plane->second.data(), r)) {
-          delete f;  // behind the camera at the start: not used
+        f->mbs.push_back({K_inv * o.x_later_px[i].homogeneous(), o.x_earlier_px[i], 1.0 / sigma});
+      }
+      // Huber weights at the start; macroblocks behind a camera there are dropped.
+      std::vector<PlaneBlockResidual::Mb> kept, all;
+      std::swap(all, f->mbs);
+      PlaneBlockResidual one = *f;  // the pose data, one macroblock at a time
+      for (const PlaneBlockResidual::Mb& mb : all) {
+        one.mbs = {mb};
+        double r1[2];
+        if (!one(a.q.coeffs().data(), a.c.data(), b.q.coeffs().data(), b.c.data(),
+                 plane->second.data(), r1)) {
           continue;
         }
-        wp.problem.AddResidualBlock(
-            new ceres::AutoDiffCostFunction<TransferResidual, 2, 4, 3, 4, 3, 3>(f), wp.loss.get(),
-            a.q.coeffs().data(), a.c.data(), b.q.coeffs().data(), b.c.data(), plane->second.data());
-        ++wp.residuals;
-        road_seen = road_seen || o.plane_id == road_id_;
+        const double norm = std::hypot(r1[0], r1[1]);
+        kept.push_back(mb);
+        kept.back().scale *= norm > options_.huber_k ? std::sqrt(options_.huber_k / norm) : 1.0;
       }
+      if (kept.empty()) continue;
+      f->mbs = std::move(kept);
+      const int num_residuals = 2 * static_cast<int>(f->mbs.size());
+      wp.residuals += num_residuals / 2;
+      wp.problem.AddResidualBlock(
+          new ceres::AutoDiffCostFunction<PlaneBlockResidual, ceres::DYNAMIC, 4, 3, 4, 3, 3>(
+              f.release(), num_residuals),
+          nullptr, a.q.coeffs().data(), a.c.data(), b.q.coeffs().data(), b.c.data(),
+          plane->second.data());
+      road_seen = road_seen || o.plane_id == road_id_;
     }
     rep->road_pairs += road_seen ? 1 : 0;
   }

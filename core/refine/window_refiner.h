@@ -17,7 +17,8 @@
 //  - Residual of a macroblock x_i (later anchor) with merged partner x_{i-1}:
 //      r = (dehom(K (R + t pi_i^T) K^-1 x_i) - x_{i-1}) / s,
 //    s^2 = Lemma 2's variance + extra_sigma_px^2 (the EKF's measurement
-//    noise), under a Huber loss at huber_k (normalised units).
+//    noise), with Huber weights at huber_k (normalised units) taken at the
+//    start of each solve (one IRLS step per solve; every anchor solves again).
 //
 // Gauge. The oldest pose is constant (6 dof). Monocular scale is the 7th
 // gauge freedom; it is carried, not re-chosen, by
@@ -66,9 +67,15 @@ struct WindowRefinerOptions {
   // 10 m/s) and angular-velocity change, rad/s per second.
   double speed_change_rel_per_s = 0.3;
   double angular_accel_rad_s2 = 0.5;
+  // A plane id whose guess (the filter's plane) differs from the window's
+  // plane by more than this angle or distance ratio is a different surface
+  // under the same id (see Push).
+  double reassociate_max_angle_deg = 10.0;
+  double reassociate_max_distance_ratio = 1.3;
 
   // InvalidArgument (prefixed with `who`) unless window_anchors >= 3,
-  // max_iterations >= 1, max_mbs_per_plane >= 4 and every sigma is > 0.
+  // max_iterations >= 1, max_mbs_per_plane >= 4, every sigma and the angle
+  // are > 0 and the distance ratio > 1.
   Status Check(const std::string& who = "WindowRefinerOptions") const;
 };
 
@@ -82,7 +89,7 @@ struct WindowPlaneObservation {
 struct WindowRefineReport {
   bool solved = false;
   int anchors = 0, planes = 0, residuals = 0;
-  double initial_rms = 0.0, final_rms = 0.0;  // normalised residuals (before the loss)
+  double initial_rms = 0.0, final_rms = 0.0;  // weighted normalised residuals
   // Newest step's length after / before the solve.
   double newest_step_ratio = 1.0;
   bool road_in_window = false;
@@ -99,8 +106,11 @@ class WindowRefiner {
   // the pair that ends at it (empty for the first anchor) and an initial
   // value, pi in this anchor's camera, for each plane id the window does not
   // hold yet (`plane_guess_cam`; planes without one are skipped). `road_id`:
-  // the plane id of the road (-1: none). Drops the oldest anchor beyond the
-  // window (and planes no pair in the window sees).
+  // the plane id of the road (-1: none). A plane id whose guess differs from
+  // the window's plane beyond reassociate_max_angle_deg / _distance_ratio is
+  // taken as a new surface: the old plane stays in the window under an
+  // internal id. Drops the oldest anchor
+  // beyond the window (and planes no pair in the window sees).
   void Push(int64_t index, double timestamp_s, const Rigid3d& world_from_cam,
             std::vector<WindowPlaneObservation> observations,
             const std::map<int, Eigen::Vector3d>& plane_guess_cam, int road_id);
@@ -131,6 +141,7 @@ class WindowRefiner {
     std::vector<WindowPlaneObservation> observations;  // pair ending here
   };
   void DropOldest();
+  void Reassociate(int plane_id, const Eigen::Vector3d& guess_cam, const Rigid3d& world_from_cam);
   // Refine's parts: the Ceres problem over the window (defined in the .cc),
   // with the poses from index `first` on being the window's anchors.
   struct Problem;
@@ -143,6 +154,7 @@ class WindowRefiner {
   std::map<int, Plane3d> planes_world_;  // plane id -> the plane in the world
   std::map<int, int> plane_solves_;      // plane id -> solves it took part in
   int road_id_ = -1;
+  int next_internal_id_ = -2;  // ids for planes moved aside by Reassociate (-1: none)
   std::optional<double> fixed_road_height_;
   // The anchor before the window (constant): the oldest step's velocity prior.
   std::optional<Anchor> before_;
