@@ -293,9 +293,8 @@ TEST(ThresholdInfinityTest, RuralRoadWithManyWrongMvsHasMotion) {
     ASSERT_TRUE(old.ok());
     refused_by_share_test += !old->has_motion;
     std::printf("seed %d: parallax inliers %d of %d rotation outliers, Sampson %d, band %d\n",
-                static_cast<int>(seed), result->num_parallax_inliers,
-                result->num_rotation_outliers, result->num_parallax_sampson_inliers,
-                result->num_parallax_control_band);
+                static_cast<int>(seed), result->num_parallax_inliers, result->num_rotation_outliers,
+                result->num_parallax_sampson_inliers, result->num_parallax_control_band);
 
     const SyntheticPair rot =
         MakePair(Frame0(), CamFromWorld({0, 0, 0}, 2.0, 0.7), 0, noise, RuralRoad());
