@@ -83,6 +83,8 @@ v1::PipelineOptions PipelineOptionsToProto(const PipelineOptions& o) {
   out.set_eps_h_px(o.extraction.eps_h_px);
   out.set_scale_source(ScaleSourceToProto(o.scale.source));
   out.set_anchors_only(!o.frame_poses.enabled);
+  out.set_window_refine(o.window_refine);
+  out.set_refine_window_anchors(o.refine.window_anchors);
   switch (o.scale.source) {
     case ScaleOptions::Source::kFirstStep:
       out.set_first_step_m(o.scale.first_step_m);
@@ -105,6 +107,9 @@ PipelineOptions PipelineOptionsFromProto(const v1::PipelineOptions& p) {
   if (p.eps_h_px() > 0) o.extraction.eps_h_px = p.eps_h_px();
   o.frame_poses.enabled = !p.anchors_only();
   o.scale.source = ScaleSourceFromProto(p.scale_source());
+  // Unset / 0 = the core struct's defaults.
+  if (p.has_window_refine()) o.window_refine = p.window_refine();
+  if (p.refine_window_anchors() > 0) o.refine.window_anchors = p.refine_window_anchors();
   switch (o.scale.source) {
     case ScaleOptions::Source::kFirstStep:
       o.scale.first_step_m = p.first_step_m();

@@ -452,6 +452,13 @@ Status ValidatePipelineOptions(const v1::PipelineOptions& p) {
                                 std::to_string(p.scale_source()) + " is not one of " +
                                 EnumValues(v1::PipelineOptions::ScaleSource_descriptor()));
   }
+  if (p.refine_window_anchors() != 0 &&
+      (p.refine_window_anchors() < 3 || p.refine_window_anchors() > 30)) {
+    return InvalidArgumentError(
+        "pipeline_options.refine_window_anchors must be in [3, 30] (0 = "
+        "default), got " +
+        std::to_string(p.refine_window_anchors()));
+  }
   auto positive = [](double v) { return Finite(v) && v > 0; };
   switch (p.scale_source()) {
     case v1::PipelineOptions::FIRST_STEP:

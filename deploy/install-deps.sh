@@ -29,6 +29,8 @@ BUILD_PACKAGES=(
   libavformat-dev libavcodec-dev libavutil-dev libswscale-dev ffmpeg
   # maths and vision
   libeigen3-dev libopencv-dev
+  # sliding-window refinement (core/refine): Ceres Solver, Levenberg-Marquardt with autodiff
+  libceres-dev
   # parsing: CLI flags (CLI11) and JSON files (nlohmann-json), header-only
   libcli11-dev nlohmann-json3-dev
   # service

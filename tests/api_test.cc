@@ -30,6 +30,8 @@ void ExpectSameCarried(const PipelineOptions& a, const PipelineOptions& b) {
   EXPECT_EQ(a.min_planes_to_initialise, b.min_planes_to_initialise);
   EXPECT_EQ(a.frame_poses.enabled, b.frame_poses.enabled);
   EXPECT_EQ(a.frame_poses.estimator.min_inliers, b.frame_poses.estimator.min_inliers);
+  EXPECT_EQ(a.window_refine, b.window_refine);
+  EXPECT_EQ(a.refine.window_anchors, b.refine.window_anchors);
 }
 
 // core -> proto -> core equals, and proto -> core -> proto equals.
@@ -54,6 +56,26 @@ TEST(PipelineOptionsRoundTrip, AnchorsOnly) {
   o.frame_poses.enabled = false;
   ExpectRoundTrips(o);
   EXPECT_TRUE(api::PipelineOptionsToProto(o).anchors_only());
+}
+
+TEST(PipelineOptionsRoundTrip, WindowRefine) {
+  PipelineOptions o;
+  o.window_refine = !PipelineOptions{}.window_refine;
+  o.refine.window_anchors = 9;
+  ExpectRoundTrips(o);
+  EXPECT_EQ(api::PipelineOptionsToProto(o).refine_window_anchors(), 9);
+  // Unset / 0 take the struct's defaults.
+  v1::PipelineOptions p;
+  EXPECT_FALSE(p.has_window_refine());
+  EXPECT_EQ(api::PipelineOptionsFromProto(p).window_refine, PipelineOptions{}.window_refine);
+  EXPECT_EQ(api::PipelineOptionsFromProto(p).refine.window_anchors,
+            WindowRefinerOptions{}.window_anchors);
+  p.set_refine_window_anchors(2);
+  EXPECT_EQ(api::ValidatePipelineOptions(p).code(), StatusCode::kInvalidArgument);
+  p.set_refine_window_anchors(31);
+  EXPECT_EQ(api::ValidatePipelineOptions(p).code(), StatusCode::kInvalidArgument);
+  p.set_refine_window_anchors(8);
+  EXPECT_TRUE(api::ValidatePipelineOptions(p).ok());
 }
 
 TEST(PipelineOptionsRoundTrip, EpsHPx) {

@@ -204,6 +204,13 @@ int RunRun(int argc, char** argv) {
   app.add_option("--steps-csv", steps_csv_path,
                  "also write one CSV row per anchor pair: its planes and the filter's")
       ->type_name("FILE");
+  app.add_option("--window-refine", po.window_refine,
+                 "sliding-window refinement of poses and planes (docs/METHOD.md)")
+      ->type_name("BOOL")
+      ->capture_default_str();
+  app.add_option("--refine-window", po.refine.window_anchors, "anchors in the refinement window")
+      ->type_name("N")
+      ->capture_default_str();
   bool quiet = false;
   app.add_flag("--quiet", quiet, "no progress line");
   MvReaderOptions ro;
@@ -218,6 +225,9 @@ int RunRun(int argc, char** argv) {
   if (cl.positional().size() != 1) return Fail("run", "expected one INPUT (see --help)", 2);
   const std::string input = cl.positional()[0];
   if (Status s = CheckRange("eps-h", po.extraction.eps_h_px, 0.05, 100); !s.ok()) {
+    return Fail("run", s.message(), 2);
+  }
+  if (Status s = CheckRange("refine-window", int64_t{po.refine.window_anchors}, 3, 30); !s.ok()) {
     return Fail("run", s.message(), 2);
   }
   auto scale = scale_flags.Options();
@@ -251,6 +261,7 @@ int RunRun(int argc, char** argv) {
   const bool progress = !quiet && isatty(STDERR_FILENO);
   int steps = 0, tracked = 0;
   std::string last_note;  // why the last untracked step did not track
+  std::string scale_note;  // the last step's, when it said something
   FrameRecord frame;
   Status end;
   while ((end = (*reader)->Next(&frame)).ok()) {
@@ -266,6 +277,7 @@ int RunRun(int argc, char** argv) {
     if (!s.note.empty()) last_note = s.note;
     ++steps;
     tracked += s.tracking;
+    if (!s.scale_note.empty()) scale_note = s.scale_note;
     if (steps_csv) WriteStepRow(steps_csv.get(), s, pipeline.trajectory());
     AppendPlaneEstimates(s.later_index, s.planes, s.extracted, s.extracted_filter_ids,
                          &plane_estimates);
@@ -287,6 +299,7 @@ int RunRun(int argc, char** argv) {
   std::printf("poses      %zu frames posed: %d anchor, %d coasting, %d frame, %d interpolated\n",
               pipeline.poses().size(), kinds[PoseKind::kAnchor], kinds[PoseKind::kCoasting],
               kinds[PoseKind::kFrame], kinds[PoseKind::kInterpolated]);
+  if (!scale_note.empty()) std::printf("scale      %s\n", scale_note.c_str());
 
   if (pipeline.trajectory().empty()) {
     // Never a silent empty result: say why (a still camera, a stream too short or too small).

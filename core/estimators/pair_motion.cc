@@ -115,6 +115,35 @@ struct MotionProblem {
   RansacOptions rotation_ransac;
 };
 
+// Test (c') of FullPath. Wrong MVs (foliage, repeated texture, low-texture
+// road) are spread over tens of pixels around any epipolar geometry, so their
+// density of Sampson distances is nearly flat near it: the rotation-only
+// outliers whose distance to E lies in the control band (2, 6] x threshold
+// (both sides: 4x the width of the inlier band |d| <= threshold) estimate how
+// many of them fall within the threshold by chance, band / 4. Genuine
+// parallax points crowd into the inlier band instead. Counts the rotation-only
+// outliers within the threshold (*inner) and in the band (*band).
+void CountParallaxBands(const MotionProblem& p, const Eigen::Matrix3d* R_rot,
+                        const Rigid3d& later_from_earlier, int* inner, int* band) {
+  constexpr double kBandLo = 2.0, kBandHi = 6.0;
+  *inner = *band = 0;
+  const Eigen::Matrix3d E = Skew(later_from_earlier.translation) * later_from_earlier.R();
+  const Eigen::Matrix3d KRrot = R_rot != nullptr ? Eigen::Matrix3d(p.K * *R_rot * p.K_inv) : p.K;
+  const double thr = p.normalised_threshold;
+  for (size_t i = 0; i < p.correspondences.size(); ++i) {
+    if (R_rot != nullptr &&
+        RotationOnlyParallaxPx(KRrot, p.correspondences[i]) < p.min_parallax_px) {
+      continue;
+    }
+    const double d = std::abs(SampsonDistance(E, p.rays_earlier[i], p.rays_later[i]));
+    if (d <= thr) {
+      ++*inner;
+    } else if (d > kBandLo * thr && d <= kBandHi * thr) {
+      ++*band;
+    }
+  }
+}
+
 // Seeded fast path (a prior given and options.use_prior). The motion of
 // consecutive anchor pairs changes slowly, so the previous pair's motion is a
 // good start: RefineRelativePose (core/estimators/relative_pose.h:
@@ -144,8 +173,8 @@ bool SeededFastPath(const MotionProblem& p, const PairMotionPrior& prior,
   refine_options.max_error = p.normalised_threshold;
   const RelativePoseRefineReport refined =
       RefineRelativePose(p.rays_earlier, p.rays_later, prior.later_from_earlier, refine_options);
-  if (!refined.success ||
-      !(refined.num_inliers >= p.options.prior_min_inlier_ratio * prior.reference_inlier_ratio * n)) {
+  if (!refined.success || !(refined.num_inliers >=
+                            p.options.prior_min_inlier_ratio * prior.reference_inlier_ratio * n)) {
     return false;
   }
   const int cheirality = CountCheirality(p.rays_earlier, p.rays_later, refined.later_from_earlier,
@@ -220,8 +249,8 @@ Status EssentialMotion(const MotionProblem& p, PairMotionReport* result, bool* h
       }
       cv::Mat pose_mask = e_mask.clone();
       cv::Mat R_cv, t_cv;
-      result->num_cheirality_inliers = cv::recoverPose(E.rowRange(0, 3), pts_earlier, pts_later,
-                                                       K_cv, R_cv, t_cv, pose_mask);
+      result->num_cheirality_inliers =
+          cv::recoverPose(E.rowRange(0, 3), pts_earlier, pts_later, K_cv, R_cv, t_cv, pose_mask);
       R_cv.convertTo(R_cv, CV_64F);
       t_cv.convertTo(t_cv, CV_64F);
       for (int r = 0; r < 3; ++r) {
@@ -250,7 +279,15 @@ Status EssentialMotion(const MotionProblem& p, PairMotionReport* result, bool* h
 // free to pick the t that makes the most *wrong* MVs look epipolar-consistent;
 // with half the MVs wrong (+-32 px) that is 20-30 points with cheirality --
 // above any sensible absolute count -- but < 10% of them, while genuine
-// parallax points are almost all E-inliers. Otherwise has_motion = false,
+// parallax points are almost all E-inliers. But (c) alone also refuses real
+// motion when wrong MVs outnumber the parallax points several times (a rural
+// road: foliage and low-texture asphalt give mostly wrong MVs, the road and a
+// guard rail the few with parallax), so (c) may be replaced by (c'): the
+// parallax points within ransac_threshold_px (Sampson) of E are at least
+// min_parallax_chance_ratio times what the wrong MVs give by chance, estimated
+// from their density in a control band of distances (CountParallaxBands).
+// Under a pure rotation E can only gather the wrong MVs' chance share, about
+// as dense inside the threshold as in the band. Otherwise has_motion = false,
 // later_from_earlier = (R_rotation_only, 0) -- or the identity when even that
 // fit fails or there are fewer than max(min_correspondences, 5) correspondences
 // (then nothing is estimated). Tests (a)-(c) are the has_motion decision below.
@@ -268,10 +305,19 @@ Status FullPath(const MotionProblem& p, PairMotionReport* result) {
                 result->e_inlier_mask, p.min_parallax_px, &result->num_rotation_outliers,
                 &result->num_parallax_inliers);
   const PairMotionOptions& o = p.options;
+  bool above_chance = false;
+  if (have_e && o.min_parallax_chance_ratio > 0) {
+    CountParallaxBands(p, rotation.success ? &rotation.model : nullptr,
+                       Rigid3d(R_e, t_e.normalized()), &result->num_parallax_sampson_inliers,
+                       &result->num_parallax_control_band);
+    const double chance = std::max(1.0, result->num_parallax_control_band / 4.0);
+    above_chance = result->num_parallax_sampson_inliers >= o.min_parallax_chance_ratio * chance;
+  }
   result->has_motion = have_e && result->num_cheirality_inliers >= o.min_correspondences &&
                        result->num_parallax_inliers >= o.min_correspondences &&
-                       result->num_parallax_inliers >=
-                           o.min_parallax_inlier_ratio * result->num_rotation_outliers;
+                       (result->num_parallax_inliers >=
+                            o.min_parallax_inlier_ratio * result->num_rotation_outliers ||
+                        above_chance);
   if (result->has_motion) {
     result->rotation_source = PairRotationSource::kEssential;
     result->later_from_earlier = Rigid3d(R_e, t_e.normalized());
@@ -291,11 +337,14 @@ Status FullPath(const MotionProblem& p, PairMotionReport* result) {
 Status PairMotionOptions::Check(const std::string& who) const {
   if (!(ransac_threshold_px > 0.0) || !(confidence > 0.0 && confidence < 1.0) ||
       !(min_parallax_inlier_ratio >= 0.0 && min_parallax_inlier_ratio <= 1.0) ||
-      !(prior_min_inlier_ratio >= 0.0) || !(prior_decision_margin >= 1.0)) {
-    return InvalidArgumentError(who +
-                                ": ransac_threshold_px must be > 0, confidence in (0, 1), "
-                                "min_parallax_inlier_ratio in [0, 1], prior_min_inlier_ratio >= 0 "
-                                "and prior_decision_margin >= 1");
+      !(min_parallax_chance_ratio >= 0.0) || !(prior_min_inlier_ratio >= 0.0) ||
+      !(prior_decision_margin >= 1.0)) {
+    return InvalidArgumentError(
+        who +
+        ": ransac_threshold_px must be > 0, confidence in (0, 1), "
+        "min_parallax_inlier_ratio in [0, 1], min_parallax_chance_ratio >= 0, "
+        "prior_min_inlier_ratio >= 0 "
+        "and prior_decision_margin >= 1");
   }
   return Status::Ok();
 }
@@ -333,8 +382,7 @@ StatusOr<PairMotionReport> EstimatePairMotion(const std::vector<Correspondence>&
   p.rotation_ransac.confidence = options.confidence;
   p.min_parallax_px = std::max(min_parallax_px, options.ransac_threshold_px);
 
-  if (prior != nullptr && options.use_prior &&
-      prior->later_from_earlier.translation.norm() > 0.0 &&
+  if (prior != nullptr && options.use_prior && prior->later_from_earlier.translation.norm() > 0.0 &&
       prior->later_from_earlier.translation.allFinite() && SeededFastPath(p, *prior, &result)) {
     return result;
   }

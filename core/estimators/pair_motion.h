@@ -41,8 +41,13 @@ struct PairMotionOptions {
   double ransac_threshold_px = 1.0;  // E and rotation-only RANSAC inlier threshold
   double confidence = 0.999;         // RANSAC confidence for both fits
   int min_correspondences = 15;      // fewer: no motion estimate (has_motion = false)
-  // Translation needs this share of the rotation-only outliers to be E-inliers.
+  // Translation needs this share of the rotation-only outliers to be E-inliers
+  // (test (c) of the full path) ...
   double min_parallax_inlier_ratio = 0.25;
+  // ... or (c') this many times as many parallax E-inliers as wrong MVs give
+  // by chance, estimated from the rotation-only outliers in a control band of
+  // Sampson distances (see FullPath). 0 = off (test (c) alone).
+  double min_parallax_chance_ratio = 4.0;
   // Seeded fast path (see EstimatePairMotion): used when a prior is passed and this is set.
   bool use_prior = true;
   // The refined motion's Sampson-inlier share must reach this fraction of the
@@ -53,6 +58,7 @@ struct PairMotionOptions {
 
   // InvalidArgument (prefixed with `who`) unless ransac_threshold_px > 0,
   // confidence in (0, 1), min_parallax_inlier_ratio in [0, 1],
+  // min_parallax_chance_ratio >= 0,
   // prior_min_inlier_ratio >= 0 and prior_decision_margin >= 1.
   Status Check(const std::string& who = "PairMotionOptions") const;
 };
@@ -87,6 +93,10 @@ struct PairMotionReport {
   int num_cheirality_inliers = 0;  // points recoverPose triangulated in front of both cameras
   int num_rotation_outliers = 0;   // points off the rotation-only model by >= min parallax
   int num_parallax_inliers = 0;    // ... of which E-inliers
+  // Full path with an E: rotation-only outliers within ransac_threshold_px
+  // (Sampson) of it, and those in the control band (2, 6] x ransac_threshold_px.
+  int num_parallax_sampson_inliers = 0;
+  int num_parallax_control_band = 0;
   // has_motion only: correspondences whose Sampson distance under
   // later_from_earlier is <= ransac_threshold_px (in px via the mean focal length).
   int num_sampson_inliers = 0;

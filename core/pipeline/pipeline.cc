@@ -39,6 +39,7 @@ Pipeline::Pipeline(const Intrinsics& intrinsics, double sigma_px, PipelineOption
       options_(options),
       front_end_(intrinsics, sigma_px, options),
       ekf_(intrinsics, options.ekf),
+      refiner_(intrinsics, options.refine),
       frame_poser_(intrinsics, sigma_px, options.frame_poses) {}
 
 StatusOr<std::optional<PipelineStep>> Pipeline::Push(const FrameRecord& frame) {
@@ -58,6 +59,7 @@ void Pipeline::Break() {
   front_end_.Reset();
   frame_poser_.Reset();
   ekf_ = PlaneEkf(intrinsics_, options_.ekf);
+  refiner_.Reset();
 }
 
 PipelineStep Pipeline::Process(const FrontEndStep& front) {
@@ -85,13 +87,22 @@ PipelineStep Pipeline::Process(const FrontEndStep& front) {
   }
   step.times.ekf_ms = MsSince(t0);
   if (step.tracking) {
-    trajectory_.push_back({pair.later_index, pair.later_timestamp_s, world_from_cam_});
     for (const ExtractedPlane& ex : step.extracted) {
       step.extracted_filter_ids.push_back(ekf_.FilterTrackId(ex.track_id));
     }
+    if (options_.window_refine) {
+      const auto t1 = std::chrono::steady_clock::now();
+      RefineWindow(pair, &step);
+      step.times.refine_ms = MsSince(t1);
+    }
+    trajectory_.push_back({pair.later_index, pair.later_timestamp_s, world_from_cam_});
     RecordPlanes(step, pair);
     if (options_.scale.source == ScaleOptions::Source::kCameraHeight && !metric_) {
-      MaybeFixScaleFromRoad();
+      if (options_.window_refine) {
+        MaybeFixScaleFromWindowRoad(&step);
+      } else {
+        MaybeFixScaleFromRoad();
+      }
     }
     step.world_from_cam = world_from_cam_;
     step.planes = ekf_.planes();
@@ -162,6 +173,7 @@ void Pipeline::Advance(const std::vector<PlaneObservation>& observations, double
     // continues from the last pose with the last step's length as scale.
     step->note = "filter reset: " + s.ToString();
     ekf_ = PlaneEkf(intrinsics_, options_.ekf);
+    refiner_.Reset();
     return;
   }
   world_from_cam_ = world_from_cam_ * ekf_.prev_from_cur();
@@ -204,7 +216,9 @@ void Pipeline::RecordPlanes(const PipelineStep& step, const AnchorPair& pair) {
 void Pipeline::MaybeFixScaleFromRoad() {
   const ScaleOptions& sc = options_.scale;
   for (const PlaneTrack& track : ekf_.planes()) {
-    if (track.observations < sc.road_min_observations) continue;
+    // A coasting road's pi was observed at an older scale and only predicted
+    // since: its height would carry the drift of the coasting stretch.
+    if (track.observations < sc.road_min_observations || track.coasting()) continue;
     // Road: pi ~ (0, 1/h, 0), so the camera height h is 1 / |pi|.
     if (!IsRoadLike(track.pi, CameraDown(), sc.road_max_angle_deg)) continue;
     ApplyScale(sc.camera_height_m * track.pi.norm());
@@ -215,6 +229,7 @@ void Pipeline::MaybeFixScaleFromRoad() {
 
 void Pipeline::ApplyScale(double s) {
   ekf_.Rescale(s);
+  refiner_.Rescale(s);
   for (TimedPose& p : trajectory_) p.world_from_cam.translation *= s;
   for (FramePose& p : poses_) {
     p.pose.world_from_cam.translation *= s;
@@ -270,6 +285,75 @@ void Pipeline::AddFramePoses(const AnchorPair& pair, PipelineStep* step) {
   anchor.quality = AnchorQuality(*step);
   step->frame_poses.push_back(anchor);
   poses_.insert(poses_.end(), step->frame_poses.begin(), step->frame_poses.end());
+// The hook of core/refine (docs/METHOD.md "Windowed refinement"). The
+// refiner's plane ids are the filter's track ids (extracted_filter_ids), its
+// initial planes the filter's, its initial pose for the new anchor the
+// refined previous pose composed with the filter's step.
+void Pipeline::RefineWindow(const AnchorPair& pair, PipelineStep* step) {
+  if (refiner_.size() == 0) {  // (re)start: the earlier anchor's pose is the last in the trajectory
+    refiner_.Push(pair.earlier_index, pair.earlier_timestamp_s, trajectory_.back().world_from_cam,
+                  {}, {}, -1);
+  }
+  std::vector<WindowPlaneObservation> observations;
+  for (size_t k = 0; k < step->extracted.size(); ++k) {
+    WindowPlaneObservation o;
+    o.plane_id = step->extracted_filter_ids[k];
+    for (int i : step->extracted[k].correspondence_indices) {
+      const Correspondence& c = pair.correspondences[i];
+      o.x_later_px.push_back(c.x_later_px);
+      o.x_earlier_px.push_back(c.x_earlier_px);
+      o.variance_px2.push_back(c.variance_px2);
+    }
+    observations.push_back(std::move(o));
+  }
+  std::map<int, Eigen::Vector3d> guesses;
+  int road_id = -1;
+  for (const PlaneTrack& track : ekf_.planes()) {
+    guesses[track.track_id] = track.pi;
+    if (track.road) road_id = track.track_id;
+  }
+  refiner_.Push(pair.later_index, pair.later_timestamp_s, world_from_cam_, std::move(observations),
+                guesses, road_id);
+  const Status s = refiner_.Refine(&step->refine);
+  if (!s.ok()) {  // the filter's pose stands; the window restarts from it
+    step->note = s.ToString();
+    refiner_.Reset();
+    return;
+  }
+  if (!step->refine.solved) return;
+  const size_t n = refiner_.size();
+  world_from_cam_ = refiner_.world_from_cam(n - 1);
+  const double ekf_length = ekf_.prev_from_cur().translation.norm();
+  const double refined_length =
+      (refiner_.world_from_cam(n - 1).translation - refiner_.world_from_cam(n - 2).translation)
+          .norm();
+  if (ekf_length > 0 && refined_length > 0) ekf_.Rescale(refined_length / ekf_length);
+  // Revise the window's earlier anchors in the trajectory (the newest is
+  // appended by Process).
+  auto it = trajectory_.rbegin();
+  for (size_t k = n - 1; k-- > 0 && it != trajectory_.rend();) {
+    while (it != trajectory_.rend() && it->index > refiner_.index(k)) ++it;
+    if (it != trajectory_.rend() && it->index == refiner_.index(k)) {
+      it->world_from_cam = refiner_.world_from_cam(k);
+    }
+  }
+}
+
+void Pipeline::MaybeFixScaleFromWindowRoad(PipelineStep* step) {
+  const ScaleOptions& sc = options_.scale;
+  const WindowRefineReport& r = step->refine;
+  if (!(r.solved && r.road_in_window && r.road_pairs >= sc.road_min_window_pairs &&
+        r.road_distance > 0)) {
+    step->scale_note = "metric scale not observable yet: the road plane is seen in " +
+                       std::to_string(r.road_pairs) + " of " + std::to_string(r.anchors - 1) +
+                       " window pairs (needs " + std::to_string(sc.road_min_window_pairs) + ")";
+    return;
+  }
+  ApplyScale(sc.camera_height_m / r.road_distance);
+  refiner_.SetRoadHeight(sc.camera_height_m);
+  metric_ = true;
+  step->scale_note = "metric: camera height over the road seen in " + std::to_string(r.road_pairs) +
+                     " window pairs";
 }
 
 }  // namespace slapse

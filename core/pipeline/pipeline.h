@@ -26,6 +26,7 @@
 #include "core/pipeline/front_end.h"
 #include "core/planes/infinity.h"
 #include "core/planes/plane_extraction.h"
+#include "core/refine/window_refiner.h"
 
 namespace slapse {
 
@@ -45,6 +46,11 @@ struct ScaleOptions {
   double camera_height_m = 0.0;
   int road_min_observations = 5;
   double road_max_angle_deg = 25.0;
+  // With the window refiner (PipelineOptions::window_refine) the height is
+  // read from the road plane refined jointly over the window, once at least
+  // this many of the window's pairs observed it; until then the step's
+  // scale_note says the metric scale is not observable yet.
+  int road_min_window_pairs = 3;
 };
 
 // The front end's options (merge, infinity, extraction) and the filter's.
@@ -55,6 +61,11 @@ struct PipelineOptions : FrontEndOptions {
   int min_planes_to_initialise = 1;
   // Poses of the frames between anchors (core/pipeline/frame_poses.h).
   FramePoserOptions frame_poses;
+  // Sliding-window refinement of the last anchors' poses and the planes they
+  // see (core/refine, docs/METHOD.md "Windowed refinement"), the EKF as its
+  // predictor. Off: the EKF's poses as they are.
+  bool window_refine = true;
+  WindowRefinerOptions refine;
 };
 
 // A plane as the map holds it: world frame, with its history.
@@ -76,6 +87,7 @@ struct MapPlane {
 struct StageTimes : FrontEndTimes {
   double ekf_ms = 0;
   double frame_poses_ms = 0;  // posing the frames between the anchors
+  double refine_ms = 0;
 };
 
 struct PipelineStep {
@@ -98,6 +110,13 @@ struct PipelineStep {
   // The filter's planes after this step (n / d in the later anchor's camera).
   std::vector<PlaneTrack> planes;
   UpdateReport ekf;
+  // The window refiner's solve (solved = false when it is off or did not run).
+  // A solve revises the poses of the window's earlier anchors in trajectory().
+  WindowRefineReport refine;
+  // Whether the metric scale is observable (empty up to scale): e.g. "metric:
+  // camera height 1.50 m over the road seen in 5 of 5 window pairs" or
+  // "metric scale not observable yet: ...".
+  std::string scale_note;
   StageTimes times;
   std::string note;  // why the step did not track, if it did not
   // The all-frames poses this step added, in display order: when tracking,
@@ -143,8 +162,7 @@ class Pipeline {
   void Initialise(const FrontEndStep& front, const std::vector<PlaneObservation>& observations,
                   double dt_s, PipelineStep* step);
   // Predicts and updates the running filter (a numerical failure resets it).
-  void Advance(const std::vector<PlaneObservation>& observations, double dt_s,
-               PipelineStep* step);
+  void Advance(const std::vector<PlaneObservation>& observations, double dt_s, PipelineStep* step);
   // The first step's length when the filter starts: the last step's on
   // re-initialisation, else from the scale source (may set metric_).
   double InitialStepLength(double dt_s);
@@ -155,11 +173,18 @@ class Pipeline {
   // later anchor, and the earlier one where the trajectory (re)starts).
   void AddFramePoses(const AnchorPair& pair, PipelineStep* step);
   PoseQuality AnchorQuality(const PipelineStep& step) const;
+  // The window refiner's hook: adds the step's anchor and observations,
+  // solves, and takes the refined poses (the EKF is rescaled to the refined
+  // step, so it predicts at the window's scale).
+  void RefineWindow(const AnchorPair& pair, PipelineStep* step);
+  // kCameraHeight with the refiner: the scale from the window's road plane.
+  void MaybeFixScaleFromWindowRoad(PipelineStep* step);
 
   Intrinsics intrinsics_;
   PipelineOptions options_;
   FrontEnd front_end_;
   PlaneEkf ekf_;
+  WindowRefiner refiner_;
   int64_t last_index_ = -1;
   Rigid3d world_from_cam_;
   bool metric_ = false;

@@ -1,5 +1,6 @@
 #include "lab/eval/trajectory_eval.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include <Eigen/SVD>
@@ -106,6 +107,34 @@ std::vector<TimedPose> TruthPoses(const GroundTruth& gt) {
         {static_cast<int64_t>(i), gt.frames[i].timestamp_s, gt.frames[i].world_from_cam});
   }
   return truth;
+}
+
+double MaxStepRatioJump(const std::vector<TimedPose>& estimate, const std::vector<TimedPose>& truth,
+                        double metres_per_unit) {
+  double worst = 0, last_ratio = 0;
+  for (size_t k = 1; k < estimate.size(); ++k) {
+    const int64_t a = estimate[k - 1].index, b = estimate[k].index;
+    if (a < 0 || b >= static_cast<int64_t>(truth.size())) continue;
+    const double true_m =
+        (truth[b].world_from_cam.translation - truth[a].world_from_cam.translation).norm();
+    const double est =
+        (estimate[k].world_from_cam.translation - estimate[k - 1].world_from_cam.translation)
+            .norm();
+    if (!(true_m > 1e-3)) continue;
+    const double ratio = metres_per_unit * est / true_m;
+    if (last_ratio > 0) worst = std::max(worst, std::abs(ratio / last_ratio - 1.0));
+    last_ratio = ratio;
+  }
+  return worst;
+}
+
+double TrueCameraHeightM(const GroundTruth& gt, int64_t index) {
+  if (index < 0 || index >= static_cast<int64_t>(gt.frames.size())) return 0.0;
+  for (const GtPlane& p : gt.planes) {
+    if (p.kind != PlaneKind::kRoad) continue;
+    return std::abs(p.distance_m - p.normal_world.dot(gt.frames[index].world_from_cam.translation));
+  }
+  return 0.0;
 }
 
 }  // namespace slapse

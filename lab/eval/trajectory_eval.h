@@ -47,4 +47,15 @@ StatusOr<TrajectoryErrors> EvaluateTrajectory(const std::vector<TimedPose>& esti
 // The true camera pose of every frame of a simulated drive.
 std::vector<TimedPose> TruthPoses(const GroundTruth& gt);
 
+// Scale steadiness (issue 12): per consecutive estimated poses k-1, k the
+// ratio of the estimated step length (times `metres_per_unit`) to the true
+// one; returns the largest |ratio_k / ratio_{k-1} - 1| (0 with < 3 poses).
+// `truth` is indexed by frame (TruthPoses).
+double MaxStepRatioJump(const std::vector<TimedPose>& estimate, const std::vector<TimedPose>& truth,
+                        double metres_per_unit);
+
+// The camera's true height above the drive's road plane in frame `index`
+// (0 when the drive has no road plane).
+double TrueCameraHeightM(const GroundTruth& gt, int64_t index);
+
 }  // namespace slapse

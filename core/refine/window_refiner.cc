@@ -1,0 +1,443 @@
+#include "core/refine/window_refiner.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <set>
+#include <utility>
+
+#include <ceres/ceres.h>
+#include <ceres/rotation.h>
+
+#include "core/common/angles.h"
+
+namespace slapse {
+namespace {
+
+template <typename T>
+using Vec3 = Eigen::Matrix<T, 3, 1>;
+template <typename T>
+using Mat3 = Eigen::Matrix<T, 3, 3>;
+
+// Plane-induced transfer of one plane's macroblocks in one pair (the
+// header's residual), one cost block per (pair, plane) so that the pose and
+// plane algebra is done once for all its macroblocks. Parameter blocks:
+// earlier pose (q, c), later pose (q, c), the plane pi_r in the window's
+// oldest camera r (world_from_r = (R_wr, c_wr), constant data).
+//   R = R_a^T R_b, t = R_a^T (c_b - c_a)                 (a_from_b)
+//   R_rb = R_wr^T R_b, t_rb = R_wr^T (c_b - c_wr)          (r_from_b)
+//   pi_b = R_rb^T pi_r / (1 - pi_r^T t_rb)
+//   H = R + t pi_b^T;  X_a = H y,  y = K^-1 [x_b; 1]
+//   r_j = w_j ([fx X_a.x / X_a.z + cx, fy X_a.y / X_a.z + cy] - x_a) / s_j
+// w_j: the Huber weight sqrt(min(1, k / |r_j|)) of the macroblock's
+// normalised residual at the start of the solve (one IRLS step per solve;
+// the window is solved again at every anchor, so the weights follow).
+struct PlaneBlockResidual {
+  struct Mb {
+    Eigen::Vector3d ray;  // K^-1 [x_later; 1]
+    Eigen::Vector2d x_earlier;
+    double scale = 1.0;  // w / s
+  };
+
+  template <typename T>
+  bool operator()(const T* q_a, const T* c_a, const T* q_b, const T* c_b, const T* pi_r,
+                  T* residual) const {
+    const Eigen::Map<const Eigen::Quaternion<T>> qa(q_a), qb(q_b);
+    const Eigen::Map<const Vec3<T>> ca(c_a), cb(c_b), pir(pi_r);
+    const Mat3<T> Ra = qa.toRotationMatrix(), Rb = qb.toRotationMatrix();
+    const Vec3<T> t = Ra.transpose() * (cb - ca);
+    const Mat3<T> R_rb = R_rw.cast<T>() * Rb;
+    const Vec3<T> t_rb = R_rw.cast<T>() * (cb - c_wr.cast<T>());
+    const Vec3<T> pi_b = R_rb.transpose() * pir / (T(1.0) - pir.dot(t_rb));
+    const Mat3<T> H = Ra.transpose() * Rb + t * pi_b.transpose();
+    for (size_t j = 0; j < mbs.size(); ++j) {
+      const Vec3<T> X = H * mbs[j].ray.cast<T>();
+      if (!(X.z() > T(1e-9))) return false;
+      residual[2 * j] = (T(fx) * X.x() / X.z() + T(cx - mbs[j].x_earlier.x())) * T(mbs[j].scale);
+      residual[2 * j + 1] =
+          (T(fy) * X.y() / X.z() + T(cy - mbs[j].x_earlier.y())) * T(mbs[j].scale);
+    }
+    return true;
+  }
+
+  std::vector<Mb> mbs;
+  double fx = 0, fy = 0, cx = 0, cy = 0;
+  Eigen::Matrix3d R_rw;
+  Eigen::Vector3d c_wr;
+};
+
+// Motion prior over three consecutive anchors a, b, c (gauge (d)):
+//   v_1 = R_a^T (c_b - c_a) / dt_1,  v_2 = R_b^T (c_c - c_b) / dt_2   (body frame)
+//   w_1 = Log(R_a^T R_b) / dt_1,     w_2 = Log(R_b^T R_c) / dt_2
+//   r = [(v_2 - v_1) / s_v; (w_2 - w_1) / s_w]
+struct MotionPriorResidual {
+  MotionPriorResidual(double dt1, double dt2, double sigma_v, double sigma_w)
+      : dt1(dt1), dt2(dt2), inv_sv(1.0 / sigma_v), inv_sw(1.0 / sigma_w) {}
+
+  template <typename T>
+  static Vec3<T> RelativeRotationLog(const Eigen::Quaternion<T>& a, const Eigen::Quaternion<T>& b) {
+    const Eigen::Quaternion<T> q = a.conjugate() * b;
+    const T wxyz[4] = {q.w(), q.x(), q.y(), q.z()};
+    Vec3<T> aa;
+    ceres::QuaternionToAngleAxis(wxyz, aa.data());
+    return aa;
+  }
+
+  template <typename T>
+  bool operator()(const T* q_a, const T* c_a, const T* q_b, const T* c_b, const T* q_c,
+                  const T* c_c, T* residual) const {
+    const Eigen::Map<const Eigen::Quaternion<T>> qa(q_a), qb(q_b), qc(q_c);
+    const Eigen::Map<const Vec3<T>> ca(c_a), cb(c_b), cc(c_c);
+    const Vec3<T> v1 = qa.conjugate() * (cb - ca) / T(dt1);
+    const Vec3<T> v2 = qb.conjugate() * (cc - cb) / T(dt2);
+    const Vec3<T> w1 = RelativeRotationLog<T>(qa, qb) / T(dt1);
+    const Vec3<T> w2 = RelativeRotationLog<T>(qb, qc) / T(dt2);
+    for (int i = 0; i < 3; ++i) {
+      residual[i] = (v2(i) - v1(i)) * T(inv_sv);
+      residual[3 + i] = (w2(i) - w1(i)) * T(inv_sw);
+    }
+    return true;
+  }
+
+  double dt1, dt2, inv_sv, inv_sw;
+};
+
+// Gauge (a): the oldest step's length, r = (|c_1 - c_0| - L) / (rel L), c_0 constant.
+struct StepLengthResidual {
+  StepLengthResidual(const Eigen::Vector3d& c0, double length, double rel_sigma)
+      : c0(c0), length(length), inv_sigma(1.0 / (rel_sigma * length)) {}
+  template <typename T>
+  bool operator()(const T* c_1, T* residual) const {
+    const Eigen::Map<const Vec3<T>> c1(c_1);
+    residual[0] = ((c1 - c0.cast<T>()).norm() - T(length)) * T(inv_sigma);
+    return true;
+  }
+  Eigen::Vector3d c0;
+  double length, inv_sigma;
+};
+
+// Gauge (c): the road's distance from the oldest camera, 1 / |pi_r|.
+struct RoadHeightResidual {
+  RoadHeightResidual(double height, double rel_sigma)
+      : height(height), inv_sigma(1.0 / (rel_sigma * height)) {}
+  template <typename T>
+  bool operator()(const T* pi_r, T* residual) const {
+    const Eigen::Map<const Vec3<T>> pi(pi_r);
+    residual[0] = (T(1.0) / pi.norm() - T(height)) * T(inv_sigma);
+    return true;
+  }
+  double height, inv_sigma;
+};
+
+// Poses as Ceres parameter blocks: Eigen quaternion (x, y, z, w) and centre.
+struct PoseBlock {
+  Eigen::Quaterniond q;
+  Eigen::Vector3d c;
+};
+
+}  // namespace
+
+Status WindowRefinerOptions::Check(const std::string& who) const {
+  if (window_anchors < 3 || max_iterations < 1 || max_mbs_per_plane < 4 || !(extra_sigma_px > 0) ||
+      !(huber_k > 0) || !(gauge_step_rel_sigma > 0) || !(road_height_rel_sigma > 0) ||
+      !(speed_change_rel_per_s > 0) || !(angular_accel_rad_s2 > 0)) {
+    return InvalidArgumentError(who +
+                                ": window_anchors must be >= 3, max_iterations >= 1, "
+                                "max_mbs_per_plane >= 4 and every sigma > 0");
+  }
+  return Status::Ok();
+}
+
+WindowRefiner::WindowRefiner(const Intrinsics& intrinsics, WindowRefinerOptions options)
+    : intrinsics_(intrinsics), options_(options) {}
+
+void WindowRefiner::Reset() {
+  anchors_.clear();
+  planes_world_.clear();
+  plane_solves_.clear();
+  road_id_ = -1;
+  next_internal_id_ = -2;
+  fixed_road_height_.reset();
+  before_.reset();
+}
+
+// A plane id whose new guess (the filter's plane) is a different surface from
+// the window's plane (the filter restarts a track that fails its association
+// gate under the same id): the window's plane and its older observations move
+// to a fresh internal id, and the id starts anew from the guess. Compared in
+// the newest camera, the normals' angle and the distances' ratio (the filter
+// is rescaled to the window at every step, so their scales agree).
+void WindowRefiner::Reassociate(int plane_id, const Eigen::Vector3d& guess_cam,
+                                const Rigid3d& world_from_cam) {
+  const auto it = planes_world_.find(plane_id);
+  if (it == planes_world_.end() || !(guess_cam.norm() > 0)) return;
+  const Plane3d old_cam = PlaneInCamera(world_from_cam, it->second, true);
+  const Plane3d new_cam = Plane3d::FromInverseDepth(guess_cam);
+  const double cos_angle = std::clamp(old_cam.normal.dot(new_cam.normal), -1.0, 1.0);
+  const double ratio = old_cam.distance > 0 ? new_cam.distance / old_cam.distance : 0.0;
+  if (std::acos(cos_angle) <= DegToRad(options_.reassociate_max_angle_deg) && ratio > 0 &&
+      std::abs(std::log(ratio)) <= std::log(options_.reassociate_max_distance_ratio)) {
+    return;
+  }
+  const int moved = next_internal_id_--;
+  planes_world_[moved] = it->second;
+  planes_world_.erase(it);
+  if (plane_solves_.count(plane_id)) {
+    plane_solves_[moved] = plane_solves_[plane_id];
+    plane_solves_.erase(plane_id);
+  }
+  for (Anchor& a : anchors_) {
+    for (WindowPlaneObservation& old : a.observations) {
+      if (old.plane_id == plane_id) old.plane_id = moved;
+    }
+  }
+  if (road_id_ == plane_id) road_id_ = moved;
+}
+
+void WindowRefiner::Push(int64_t index, double timestamp_s, const Rigid3d& world_from_cam,
+                         std::vector<WindowPlaneObservation> observations,
+                         const std::map<int, Eigen::Vector3d>& plane_guess_cam, int road_id) {
+  Anchor a;
+  a.index = index;
+  a.timestamp_s = timestamp_s;
+  a.world_from_cam = world_from_cam;
+  // Observations of planes the window neither holds nor gets a guess for are skipped.
+  for (WindowPlaneObservation& o : observations) {
+    const auto guess = plane_guess_cam.find(o.plane_id);
+    if (guess != plane_guess_cam.end()) Reassociate(o.plane_id, guess->second, world_from_cam);
+    if (planes_world_.count(o.plane_id) == 0) {
+      if (guess == plane_guess_cam.end() || !(guess->second.norm() > 0)) continue;
+      planes_world_[o.plane_id] =
+          TransformPlane(world_from_cam, Plane3d::FromInverseDepth(guess->second));
+    }
+    if (!anchors_.empty()) a.observations.push_back(std::move(o));
+  }
+  if (road_id >= 0) road_id_ = road_id;
+  anchors_.push_back(std::move(a));
+  while (static_cast<int>(anchors_.size()) > options_.window_anchors) DropOldest();
+}
+
+void WindowRefiner::DropOldest() {
+  Anchor oldest = std::move(anchors_.front());
+  anchors_.pop_front();
+  oldest.observations.clear();
+  before_ = std::move(oldest);
+  // Planes no pair in the window sees any more leave it.
+  std::set<int> seen;
+  for (size_t k = 1; k < anchors_.size(); ++k) {
+    for (const WindowPlaneObservation& o : anchors_[k].observations) seen.insert(o.plane_id);
+  }
+  for (auto it = planes_world_.begin(); it != planes_world_.end();) {
+    if (seen.count(it->first)) {
+      ++it;
+    } else {
+      plane_solves_.erase(it->first);
+      it = planes_world_.erase(it);
+    }
+  }
+}
+
+// The window's parameter blocks and the problem over them.
+struct WindowRefiner::Problem {
+  std::vector<PoseBlock> poses;        // [before (if any),] anchors oldest .. newest
+  std::map<int, Eigen::Vector3d> pis;  // plane id -> pi in the oldest camera
+  ceres::Problem problem;
+  std::unique_ptr<ceres::Manifold> quaternion;
+  int residuals = 0;
+
+  static ceres::Problem::Options Options() {
+    ceres::Problem::Options o;
+    o.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+    return o;
+  }
+  Problem() : problem(Options()) {}
+  void AddPose(PoseBlock* p, bool constant) {
+    problem.AddParameterBlock(p->q.coeffs().data(), 4, quaternion.get());
+    problem.AddParameterBlock(p->c.data(), 3);
+    if (constant) {
+      problem.SetParameterBlockConstant(p->q.coeffs().data());
+      problem.SetParameterBlockConstant(p->c.data());
+    }
+  }
+};
+
+Status WindowRefiner::Refine(WindowRefineReport* report) {
+  WindowRefineReport local;
+  WindowRefineReport& rep = report != nullptr ? *report : local;
+  rep = WindowRefineReport();
+  const size_t n = anchors_.size();
+  rep.anchors = static_cast<int>(n);
+  if (n < 2) return Status::Ok();
+  Problem wp;
+  wp.quaternion = std::make_unique<ceres::EigenQuaternionManifold>();
+  const size_t first = before_ ? 1 : 0;  // index of anchor 0 in wp.poses
+  wp.poses.reserve(n + 1);
+  if (before_)
+    wp.poses.push_back({before_->world_from_cam.rotation, before_->world_from_cam.translation});
+  for (const Anchor& a : anchors_)
+    wp.poses.push_back({a.world_from_cam.rotation, a.world_from_cam.translation});
+  for (size_t k = 0; k < wp.poses.size(); ++k) wp.AddPose(&wp.poses[k], k <= first);
+  const Rigid3d world_from_r = anchors_[0].world_from_cam;
+  for (const auto& [id, plane] : planes_world_) {
+    const Plane3d p = PlaneInCamera(world_from_r, plane, true);
+    if (p.distance > 0) wp.pis[id] = p.InverseDepth();
+  }
+  const double before_step =
+      (anchors_[n - 1].world_from_cam.translation - anchors_[n - 2].world_from_cam.translation)
+          .norm();
+  AddTransferResiduals(&wp, first, &rep);
+  if (wp.residuals == 0) return Status::Ok();
+  AddGaugeAndPriors(&wp, first, &rep);
+
+  ceres::Solver::Options so;
+  so.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;
+  so.max_num_iterations = options_.max_iterations;
+  so.num_threads = 1;
+  so.logging_type = ceres::SILENT;
+  ceres::Solver::Summary summary;
+  ceres::Solve(so, &wp.problem, &summary);
+  if (!summary.IsSolutionUsable() || !std::isfinite(summary.final_cost)) {
+    return InternalError("window refinement failed: " + summary.message);
+  }
+  rep.solved = true;
+  rep.residuals = wp.residuals;
+  rep.initial_rms = std::sqrt(2.0 * summary.initial_cost / wp.residuals);
+  rep.final_rms = std::sqrt(2.0 * summary.final_cost / wp.residuals);
+  for (size_t k = 1; k < n; ++k) {
+    anchors_[k].world_from_cam = Rigid3d(wp.poses[first + k].q.normalized(), wp.poses[first + k].c);
+  }
+  for (const auto& [id, pi] : wp.pis) {
+    planes_world_[id] = TransformPlane(world_from_r, Plane3d::FromInverseDepth(pi));
+    ++plane_solves_[id];
+  }
+  rep.planes = static_cast<int>(wp.pis.size());
+  const double after_step =
+      (anchors_[n - 1].world_from_cam.translation - anchors_[n - 2].world_from_cam.translation)
+          .norm();
+  rep.newest_step_ratio = before_step > 0 ? after_step / before_step : 1.0;
+  if (const auto road = RoadInNewest(); road.has_value()) {
+    rep.road_in_window = true;
+    rep.road_distance = 1.0 / road->norm();
+  }
+  return Status::Ok();
+}
+
+void WindowRefiner::AddTransferResiduals(Problem* problem, size_t first,
+                                         WindowRefineReport* rep) const {
+  Problem& wp = *problem;
+  const Eigen::Matrix3d K_inv = intrinsics_.K().inverse();
+  for (size_t k = 1; k < anchors_.size(); ++k) {
+    PoseBlock& a = wp.poses[first + k - 1];
+    PoseBlock& b = wp.poses[first + k];
+    bool road_seen = false;
+    for (const WindowPlaneObservation& o : anchors_[k].observations) {
+      auto plane = wp.pis.find(o.plane_id);
+      if (plane == wp.pis.end()) continue;
+      auto f = std::make_unique<PlaneBlockResidual>();
+      f->fx = intrinsics_.fx_px;
+      f->fy = intrinsics_.fy_px;
+      f->cx = intrinsics_.cx_px;
+      f->cy = intrinsics_.cy_px;
+      f->R_rw = anchors_[0].world_from_cam.R().transpose();
+      f->c_wr = anchors_[0].world_from_cam.translation;
+      const size_t m = o.x_later_px.size();
+      const size_t stride =
+          std::max<size_t>(1, (m + options_.max_mbs_per_plane - 1) / options_.max_mbs_per_plane);
+      for (size_t i = 0; i < m; i += stride) {
+        const double sigma =
+            std::sqrt(o.variance_px2[i] + options_.extra_sigma_px * options_.extra_sigma_px);
+        f->mbs.push_back({K_inv * o.x_later_px[i].homogeneous(), o.x_earlier_px[i], 1.0 / sigma});
+      }
+      // Huber weights at the start; macroblocks behind a camera there are dropped.
+      std::vector<PlaneBlockResidual::Mb> kept, all;
+      std::swap(all, f->mbs);
+      PlaneBlockResidual one = *f;  // the pose data, one macroblock at a time
+      for (const PlaneBlockResidual::Mb& mb : all) {
+        one.mbs = {mb};
+        double r1[2];
+        if (!one(a.q.coeffs().data(), a.c.data(), b.q.coeffs().data(), b.c.data(),
+                 plane->second.data(), r1)) {
+          continue;
+        }
+        const double norm = std::hypot(r1[0], r1[1]);
+        kept.push_back(mb);
+        kept.back().scale *= norm > options_.huber_k ? std::sqrt(options_.huber_k / norm) : 1.0;
+      }
+      if (kept.empty()) continue;
+      f->mbs = std::move(kept);
+      const int num_residuals = 2 * static_cast<int>(f->mbs.size());
+      wp.residuals += num_residuals / 2;
+      wp.problem.AddResidualBlock(
+          new ceres::AutoDiffCostFunction<PlaneBlockResidual, ceres::DYNAMIC, 4, 3, 4, 3, 3>(
+              f.release(), num_residuals),
+          nullptr, a.q.coeffs().data(), a.c.data(), b.q.coeffs().data(), b.c.data(),
+          plane->second.data());
+      road_seen = road_seen || o.plane_id == road_id_;
+    }
+    rep->road_pairs += road_seen ? 1 : 0;
+  }
+}
+
+void WindowRefiner::AddGaugeAndPriors(Problem* problem, size_t first, WindowRefineReport* rep) {
+  Problem& wp = *problem;
+  // (a) the oldest step's length.
+  const Eigen::Vector3d& c0 = wp.poses[first].c;
+  const double length = (wp.poses[first + 1].c - c0).norm();
+  if (length > 0) {
+    wp.problem.AddResidualBlock(
+        new ceres::AutoDiffCostFunction<StepLengthResidual, 1, 3>(
+            new StepLengthResidual(c0, length, options_.gauge_step_rel_sigma)),
+        nullptr, wp.poses[first + 1].c.data());
+  }
+  // (c) the road's height, once it took part in a solve (or is metric).
+  const auto road = wp.pis.find(road_id_);
+  if (road != wp.pis.end() && rep->road_pairs > 0 &&
+      (fixed_road_height_.has_value() || plane_solves_.count(road_id_))) {
+    const double h = fixed_road_height_.value_or(1.0 / road->second.norm());
+    wp.problem.AddResidualBlock(new ceres::AutoDiffCostFunction<RoadHeightResidual, 1, 3>(
+                                    new RoadHeightResidual(h, options_.road_height_rel_sigma)),
+                                nullptr, road->second.data());
+  }
+  // (d) the motion prior over each three consecutive poses.
+  double max_speed = 0;
+  std::vector<double> t_s;
+  if (before_) t_s.push_back(before_->timestamp_s);
+  for (const Anchor& a : anchors_) t_s.push_back(a.timestamp_s);
+  for (size_t k = 1; k < wp.poses.size(); ++k) {
+    const double dt = t_s[k] - t_s[k - 1];
+    if (dt > 0) max_speed = std::max(max_speed, (wp.poses[k].c - wp.poses[k - 1].c).norm() / dt);
+  }
+  for (size_t k = 2; k < wp.poses.size(); ++k) {
+    const double dt1 = t_s[k - 1] - t_s[k - 2], dt2 = t_s[k] - t_s[k - 1];
+    if (!(dt1 > 0 && dt2 > 0)) continue;
+    const double speed =
+        std::max((wp.poses[k - 1].c - wp.poses[k - 2].c).norm() / dt1, 1e-3 * max_speed);
+    if (!(speed > 0)) continue;
+    const double dt = 0.5 * (dt1 + dt2);
+    PoseBlock &a = wp.poses[k - 2], &b = wp.poses[k - 1], &c = wp.poses[k];
+    wp.problem.AddResidualBlock(
+        new ceres::AutoDiffCostFunction<MotionPriorResidual, 6, 4, 3, 4, 3, 4, 3>(
+            new MotionPriorResidual(dt1, dt2, options_.speed_change_rel_per_s * speed * dt,
+                                    options_.angular_accel_rad_s2 * dt)),
+        nullptr, a.q.coeffs().data(), a.c.data(), b.q.coeffs().data(), b.c.data(),
+        c.q.coeffs().data(), c.c.data());
+  }
+}
+
+std::optional<Eigen::Vector3d> WindowRefiner::RoadInNewest() const {
+  const auto it = planes_world_.find(road_id_);
+  if (it == planes_world_.end() || anchors_.empty()) return std::nullopt;
+  const Plane3d p = PlaneInCamera(anchors_.back().world_from_cam, it->second, true);
+  if (!(p.distance > 0)) return std::nullopt;
+  return p.InverseDepth();
+}
+
+void WindowRefiner::Rescale(double s) {
+  for (Anchor& a : anchors_) a.world_from_cam.translation *= s;
+  if (before_) before_->world_from_cam.translation *= s;
+  for (auto& [id, plane] : planes_world_) plane.distance *= s;
+  if (fixed_road_height_) *fixed_road_height_ *= s;
+}
+
+}  // namespace slapse

@@ -1,0 +1,163 @@
+// Sliding-window refinement of anchor poses and planes (docs/METHOD.md
+// "Windowed refinement").
+//
+// The window holds the last `window_anchors` anchors (poses world_from_cam)
+// and every plane observed by one of the window's anchor pairs. One plane is
+// one set of parameters across all pairs that observe it: a plane seen by
+// several pairs is fitted over their combined (longer) baseline.
+//
+// Frames and conventions (those of core/ekf/plane_ekf.h):
+//  - Anchor i has pose world_from_cam_i = (R_i, c_i).
+//  - Pair (i-1, i): prev_from_cur = (R, t) with R = R_{i-1}^T R_i,
+//    t = R_{i-1}^T (c_i - c_{i-1}); X_{i-1} = R X_i + t.
+//  - A plane is held as pi_r (pi^T X = 1) in the camera r of the window's
+//    oldest anchor, which is held constant during a solve. In camera i
+//    (r_from_i = (R_ri, t_ri)):  pi_i = R_ri^T pi_r / (1 - pi_r^T t_ri)
+//    (the EKF's plane transition).
+//  - Residual of a macroblock x_i (later anchor) with merged partner x_{i-1}:
+//      r = (dehom(K (R + t pi_i^T) K^-1 x_i) - x_{i-1}) / s,
+//    s^2 = Lemma 2's variance + extra_sigma_px^2 (the EKF's measurement
+//    noise), with Huber weights at huber_k (normalised units) taken at the
+//    start of each solve (one IRLS step per solve; every anchor solves again).
+//
+// Gauge. The oldest pose is constant (6 dof). Monocular scale is the 7th
+// gauge freedom; it is carried, not re-chosen, by
+//  (a) a prior on the oldest step's length (the step from the oldest anchor
+//      to the next), at its value from the previous solve, with
+//      gauge_step_rel_sigma: the scale the window inherits;
+//  (b) the planes seen across the window: each is one unknown for all pairs
+//      that see it, so a new plane's scale is tied to the steps that saw the
+//      old ones;
+//  (c) the road: its distance from the oldest camera (the camera height) has
+//      a prior at its previous estimate (or the metric camera height) with
+//      road_height_rel_sigma;
+//  (d) the motion prior: consecutive steps' velocities (t / dt, in the body
+//      frame) and angular velocities differ by a car's acceleration, so a
+//      step that sees only new planes cannot take a new scale in one step.
+// Cost: Levenberg-Marquardt (Ceres, dense Schur on the few poses), at most
+// max_iterations; macroblocks per (pair, plane) are subsampled to
+// max_mbs_per_plane, so a solve's cost is bounded by the window size.
+#pragma once
+
+#include <cstdint>
+#include <deque>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/common/camera.h"
+#include "core/common/plane.h"
+#include "core/common/rigid3.h"
+#include "core/common/status.h"
+
+namespace slapse {
+
+struct WindowRefinerOptions {
+  int window_anchors = 6;               // poses in the window (>= 3)
+  int max_iterations = 6;               // Levenberg-Marquardt iterations per solve
+  int max_mbs_per_plane = 48;           // per pair and plane, evenly subsampled
+  double extra_sigma_px = 1.0;          // added in quadrature to Lemma 2's variance
+  double huber_k = 2.0;                 // Huber threshold, normalised residual units
+  double gauge_step_rel_sigma = 0.002;  // (a): oldest step's length, relative
+  double road_height_rel_sigma = 0.01;  // (c): road distance, relative
+  // (d): velocity change per second relative to the speed (0.3: 3 m/s^2 at
+  // 10 m/s) and angular-velocity change, rad/s per second.
+  double speed_change_rel_per_s = 0.3;
+  double angular_accel_rad_s2 = 0.5;
+  // A plane id whose guess (the filter's plane) differs from the window's
+  // plane by more than this angle or distance ratio is a different surface
+  // under the same id (see Push).
+  double reassociate_max_angle_deg = 10.0;
+  double reassociate_max_distance_ratio = 1.3;
+
+  // InvalidArgument (prefixed with `who`) unless window_anchors >= 3,
+  // max_iterations >= 1, max_mbs_per_plane >= 4, every sigma and the angle
+  // are > 0 and the distance ratio > 1.
+  Status Check(const std::string& who = "WindowRefinerOptions") const;
+};
+
+// One plane's macroblocks in one anchor pair (later anchor -> earlier).
+struct WindowPlaneObservation {
+  int plane_id = -1;  // the same id in every pair that sees this plane
+  std::vector<Eigen::Vector2d> x_later_px, x_earlier_px;
+  std::vector<double> variance_px2;  // Lemma 2, per axis
+};
+
+struct WindowRefineReport {
+  bool solved = false;
+  int anchors = 0, planes = 0, residuals = 0;
+  double initial_rms = 0.0, final_rms = 0.0;  // weighted normalised residuals
+  // Newest step's length after / before the solve.
+  double newest_step_ratio = 1.0;
+  bool road_in_window = false;
+  double road_distance = 0.0;  // from the newest camera, trajectory units (0: no road)
+  int road_pairs = 0;          // pairs in the window that observed the road
+};
+
+class WindowRefiner {
+ public:
+  explicit WindowRefiner(const Intrinsics& intrinsics, WindowRefinerOptions options = {});
+
+  // Adds anchor `index` at time `timestamp_s` with a predicted pose (e.g. the
+  // previous refined pose composed with the EKF's step), the observations of
+  // the pair that ends at it (empty for the first anchor) and an initial
+  // value, pi in this anchor's camera, for each plane id the window does not
+  // hold yet (`plane_guess_cam`; planes without one are skipped). `road_id`:
+  // the plane id of the road (-1: none). A plane id whose guess differs from
+  // the window's plane beyond reassociate_max_angle_deg / _distance_ratio is
+  // taken as a new surface: the old plane stays in the window under an
+  // internal id. Drops the oldest anchor
+  // beyond the window (and planes no pair in the window sees).
+  void Push(int64_t index, double timestamp_s, const Rigid3d& world_from_cam,
+            std::vector<WindowPlaneObservation> observations,
+            const std::map<int, Eigen::Vector3d>& plane_guess_cam, int road_id);
+
+  // Solves the window. On success the poses() and planes are updated.
+  // A window with fewer than 2 anchors is left as is (solved = false).
+  Status Refine(WindowRefineReport* report);
+
+  // Metric road height: from now on the road prior (c) uses this distance
+  // (trajectory units) instead of its running estimate.
+  void SetRoadHeight(double height) { fixed_road_height_ = height; }
+
+  // Multiplies every length by s (poses, planes, priors).
+  void Rescale(double s);
+  void Reset();
+
+  size_t size() const { return anchors_.size(); }
+  int64_t index(size_t k) const { return anchors_[k].index; }
+  const Rigid3d& world_from_cam(size_t k) const { return anchors_[k].world_from_cam; }
+  // The road's inverse depth pi in the newest camera (nullopt: no road in the window).
+  std::optional<Eigen::Vector3d> RoadInNewest() const;
+
+ private:
+  struct Anchor {
+    int64_t index = -1;
+    double timestamp_s = 0.0;
+    Rigid3d world_from_cam;
+    std::vector<WindowPlaneObservation> observations;  // pair ending here
+  };
+  void DropOldest();
+  void Reassociate(int plane_id, const Eigen::Vector3d& guess_cam, const Rigid3d& world_from_cam);
+  // Refine's parts: the Ceres problem over the window (defined in the .cc),
+  // with the poses from index `first` on being the window's anchors.
+  struct Problem;
+  void AddTransferResiduals(Problem* wp, size_t first, WindowRefineReport* rep) const;
+  void AddGaugeAndPriors(Problem* wp, size_t first, WindowRefineReport* rep);
+
+  Intrinsics intrinsics_;
+  WindowRefinerOptions options_;
+  std::deque<Anchor> anchors_;
+  std::map<int, Plane3d> planes_world_;  // plane id -> the plane in the world
+  std::map<int, int> plane_solves_;      // plane id -> solves it took part in
+  int road_id_ = -1;
+  int next_internal_id_ = -2;  // ids for planes moved aside by Reassociate (-1: none)
+  std::optional<double> fixed_road_height_;
+  // The anchor before the window (constant): the oldest step's velocity prior.
+  std::optional<Anchor> before_;
+};
+
+}  // namespace slapse

@@ -1,0 +1,226 @@
+// WindowRefiner (core/refine) on synthetic correspondences with exact ground
+// truth: a camera driving a straight street with a slight turn, a road plane
+// and walls; the pair observations are exact plane-induced transfers (plus
+// fixed-seed noise where said).
+#include "core/refine/window_refiner.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <map>
+#include <random>
+#include <vector>
+
+#include "core/common/plane.h"
+
+namespace slapse {
+namespace {
+
+constexpr double kDtS = 0.1;
+constexpr double kStepM = 1.2;  // 12 m/s
+
+Intrinsics TestIntrinsics() {
+  Intrinsics k;
+  k.fx_px = k.fy_px = 457.0;
+  k.cx_px = 319.5;
+  k.cy_px = 239.5;
+  k.width_px = 640;
+  k.height_px = 480;
+  return k;
+}
+
+// Anchor k's true pose: forward along z, yawing 0.5 deg per step.
+Rigid3d TruePose(int k) {
+  Rigid3d pose;
+  double yaw = 0.0;
+  for (int i = 0; i < k; ++i) {
+    const Eigen::Quaterniond r(Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitY()));
+    pose.translation += r * Eigen::Vector3d(0, 0, kStepM);
+    yaw += 0.5 * M_PI / 180.0;
+  }
+  pose.rotation = Eigen::Quaterniond(Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitY()));
+  return pose;
+}
+
+struct WorldPlane {
+  int id;
+  Plane3d plane;                      // world frame
+  int first, last;                    // anchors (later anchor of a pair) that observe it
+  double u_min, u_max, v_min, v_max;  // image region its blocks are sampled from
+};
+
+// The street: the road (1.5 m below), a left wall seen throughout, and a
+// right-side group that turns over at anchor 8 (walls 2, 3 until 7; walls 4, 5
+// from 8 on).
+std::vector<WorldPlane> Street(bool with_road) {
+  std::vector<WorldPlane> planes;
+  if (with_road) planes.push_back({0, {{0, 1, 0}, 1.5}, 1, 100, 40, 600, 330, 470});
+  planes.push_back({1, {{-1, 0, 0}, 5.0}, 1, 100, 10, 150, 60, 300});
+  planes.push_back({2, {{1, 0, 0}, 6.0}, 1, 7, 480, 630, 60, 300});
+  planes.push_back({3, {{1, 0, 0}, 7.0}, 1, 7, 400, 470, 60, 200});
+  planes.push_back({4, {{1, 0, 0}, 6.5}, 8, 100, 480, 630, 60, 300});
+  planes.push_back({5, {{1, 0, 0}, 8.0}, 8, 100, 400, 470, 60, 200});
+  return planes;
+}
+
+// Exact observations of pair (k-1, k): a 16 px grid over each plane's region,
+// the later pixel's ray cut with the plane, projected into anchor k-1.
+std::vector<WindowPlaneObservation> Observe(const std::vector<WorldPlane>& planes, int k,
+                                            double noise_px, std::mt19937* rng) {
+  const Intrinsics K = TestIntrinsics();
+  const Rigid3d world_from_b = TruePose(k), world_from_a = TruePose(k - 1);
+  const Rigid3d a_from_b = world_from_a.Inverse() * world_from_b;
+  std::normal_distribution<double> noise(0.0, noise_px);
+  std::vector<WindowPlaneObservation> out;
+  for (const WorldPlane& wp : planes) {
+    if (k < wp.first || k > wp.last) continue;
+    const Plane3d pb = PlaneInCamera(world_from_b, wp.plane, true);
+    WindowPlaneObservation o;
+    o.plane_id = wp.id;
+    for (double v = wp.v_min; v <= wp.v_max; v += 16) {
+      for (double u = wp.u_min; u <= wp.u_max; u += 16) {
+        const Eigen::Vector3d ray = K.Unproject({u, v});
+        const double inv_depth = pb.InverseDepth().dot(ray);
+        if (!(inv_depth > 1.0 / 80.0)) continue;  // behind or beyond 80 m
+        const Eigen::Vector3d Xa = a_from_b * (ray / inv_depth);
+        if (!(Xa.z() > 0.5)) continue;
+        const Eigen::Vector2d xa(K.fx_px * Xa.x() / Xa.z() + K.cx_px,
+                                 K.fy_px * Xa.y() / Xa.z() + K.cy_px);
+        o.x_later_px.push_back({u, v});
+        o.x_earlier_px.push_back(
+            noise_px > 0 ? Eigen::Vector2d(xa.x() + noise(*rng), xa.y() + noise(*rng)) : xa);
+        o.variance_px2.push_back(0.25 * 0.25 / 3);
+      }
+    }
+    if (o.x_later_px.size() >= 4) out.push_back(std::move(o));
+  }
+  return out;
+}
+
+// pi of each observed plane in anchor k's camera, its distance off by `scale`.
+std::map<int, Eigen::Vector3d> Guesses(const std::vector<WorldPlane>& planes, int k, double scale) {
+  std::map<int, Eigen::Vector3d> g;
+  for (const WorldPlane& wp : planes) {
+    if (k < wp.first || k > wp.last) continue;
+    g[wp.id] = PlaneInCamera(TruePose(k), wp.plane, true).InverseDepth() / scale;
+  }
+  return g;
+}
+
+double StepLength(const WindowRefiner& r, size_t k) {
+  return (r.world_from_cam(k).translation - r.world_from_cam(k - 1).translation).norm();
+}
+
+// Streams a drive through the refiner as the pipeline does: each new anchor's
+// pose guess is the last refined pose composed with the true step scaled by
+// `step_error` at anchor `bad_anchor` (the filter's jump at a plane turnover)
+// and new planes come with the same wrong scale. Returns the worst
+// |refined step / true step - 1| of the newest step over the drive.
+double WorstNewestStepError(const std::vector<WorldPlane>& planes, int anchors, int bad_anchor,
+                            double step_error, double noise_px, WindowRefinerOptions options) {
+  std::mt19937 rng(7);
+  WindowRefiner refiner(TestIntrinsics(), options);
+  refiner.Push(0, 0.0, TruePose(0), {}, {}, -1);
+  double worst = 0;
+  for (int k = 1; k < anchors; ++k) {
+    const Rigid3d true_step = TruePose(k - 1).Inverse() * TruePose(k);
+    Rigid3d step = true_step;
+    const double s = k == bad_anchor ? step_error : 1.0;
+    step.translation *= s;
+    const Rigid3d guess = refiner.world_from_cam(refiner.size() - 1) * step;
+    refiner.Push(k, k * kDtS, guess, Observe(planes, k, noise_px, &rng), Guesses(planes, k, s),
+                 planes.front().id == 0 ? 0 : -1);
+    WindowRefineReport report;
+    EXPECT_TRUE(refiner.Refine(&report).ok());
+    EXPECT_TRUE(report.solved);
+    const double err = std::abs(StepLength(refiner, refiner.size() - 1) / kStepM - 1.0);
+    worst = std::max(worst, err);
+  }
+  return worst;
+}
+
+TEST(WindowRefinerTest, RecoversPosesAndPlanesWithTheOldestPoseFixed) {
+  const std::vector<WorldPlane> planes = Street(true);
+  WindowRefiner refiner(TestIntrinsics());
+  std::mt19937 rng(1);
+  // Exact first two anchors (the gauge), then guesses off by 8 % in scale and 1 deg.
+  refiner.Push(0, 0.0, TruePose(0), {}, {}, -1);
+  refiner.Push(1, kDtS, TruePose(1), Observe(planes, 1, 0, &rng), Guesses(planes, 1, 1.0), 0);
+  for (int k = 2; k < 6; ++k) {
+    Rigid3d guess = TruePose(k);
+    guess.translation += (TruePose(k).translation - TruePose(1).translation) * 0.08;
+    guess.rotation =
+        guess.rotation * Eigen::Quaterniond(Eigen::AngleAxisd(0.017, Eigen::Vector3d::UnitX()));
+    refiner.Push(k, k * kDtS, guess, Observe(planes, k, 0, &rng), Guesses(planes, k, 1.08), 0);
+  }
+  const Rigid3d oldest_before = refiner.world_from_cam(0);
+  WindowRefineReport report;
+  ASSERT_TRUE(refiner.Refine(&report).ok());
+  ASSERT_TRUE(report.solved);
+  EXPECT_EQ(report.anchors, 6);
+  EXPECT_GT(report.residuals, 200);
+  EXPECT_LT(report.final_rms, 0.05 * report.initial_rms);
+  // Gauge: the oldest pose is untouched.
+  EXPECT_EQ(refiner.world_from_cam(0).translation, oldest_before.translation);
+  EXPECT_EQ(refiner.world_from_cam(0).rotation.coeffs(), oldest_before.rotation.coeffs());
+  for (size_t k = 1; k < refiner.size(); ++k) {
+    const Rigid3d truth = TruePose(static_cast<int>(refiner.index(k)));
+    EXPECT_LT((refiner.world_from_cam(k).translation - truth.translation).norm(), 0.01 * kStepM * k)
+        << "anchor " << k;
+    EXPECT_LT(refiner.world_from_cam(k).rotation.angularDistance(truth.rotation), 1e-3);
+  }
+  // The road: 1.5 m below the newest camera.
+  ASSERT_TRUE(report.road_in_window);
+  EXPECT_NEAR(report.road_distance, 1.5, 0.015);
+  EXPECT_EQ(report.road_pairs, 5);
+}
+
+// The scale must not jump when the observed planes turn over: with no road,
+// the right-hand walls are replaced by new ones at anchor 8 and the
+// predictor's step and the new planes come 30 % too long (the filter's jump
+// the issue reports). The window (planes seen across it, the motion prior)
+// keeps the newest step within 3 % of the truth; without the motion prior
+// (sigma huge) nothing ties the new planes' scale to the old and the jump
+// stays.
+TEST(WindowRefinerTest, ScaleHoldsThroughAPlaneTurnover) {
+  const std::vector<WorldPlane> planes = Street(false);
+  WindowRefinerOptions o;
+  // A wall seen across the window carries the scale.
+  EXPECT_LT(WorstNewestStepError(planes, 16, 8, 1.3, 0.1, o), 0.03);
+  // Every plane turns over at once: the motion prior alone carries it.
+  const std::vector<WorldPlane> right_only(planes.begin() + 1, planes.end());
+  EXPECT_LT(WorstNewestStepError(right_only, 16, 8, 1.3, 0.1, o), 0.03);
+  // Without the motion prior nothing ties the new planes' scale to the old
+  // steps: the jump stays (so the bound above is the prior's doing).
+  o.speed_change_rel_per_s = 1e3;
+  o.angular_accel_rad_s2 = 1e3;
+  EXPECT_GT(WorstNewestStepError(right_only, 16, 8, 1.3, 0.1, o), 0.2);
+}
+
+TEST(WindowRefinerTest, WindowIsBounded) {
+  const std::vector<WorldPlane> planes = Street(true);
+  WindowRefinerOptions o;
+  o.window_anchors = 4;
+  WindowRefiner refiner(TestIntrinsics(), o);
+  std::mt19937 rng(3);
+  refiner.Push(0, 0.0, TruePose(0), {}, {}, -1);
+  for (int k = 1; k < 12; ++k) {
+    refiner.Push(k, k * kDtS, TruePose(k), Observe(planes, k, 0, &rng), Guesses(planes, k, 1.0), 0);
+    EXPECT_LE(refiner.size(), 4u);
+  }
+  EXPECT_EQ(refiner.index(0), 8);
+  EXPECT_EQ(refiner.index(3), 11);
+}
+
+TEST(WindowRefinerTest, OptionsCheck) {
+  EXPECT_TRUE(WindowRefinerOptions{}.Check().ok());
+  WindowRefinerOptions o;
+  o.window_anchors = 2;
+  EXPECT_EQ(o.Check().code(), StatusCode::kInvalidArgument);
+  o = WindowRefinerOptions{};
+  o.huber_k = 0;
+  EXPECT_EQ(o.Check().code(), StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace slapse
