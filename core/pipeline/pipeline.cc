@@ -112,7 +112,11 @@ PipelineStep Pipeline::Process(const FrontEndStep& front) {
   } else {
     frame_poser_.Skip(pair.later_index);
   }
-  first_revisable_pose_ = poses_.size();
+  // Without the refiner nothing is revised; with it, the poses from the
+  // window's oldest anchor on may still move.
+  first_revisable_pose_ = options_.window_refine && refiner_.size() > 0
+                              ? std::min(first_window_pose_, poses_.size())
+                              : poses_.size();
   step.metric = metric_;
   return step;
 }
@@ -329,13 +333,38 @@ void Pipeline::RefineWindow(const AnchorPair& pair, PipelineStep* step) {
           .norm();
   if (ekf_length > 0 && refined_length > 0) ekf_.Rescale(refined_length / ekf_length);
   // Revise the window's earlier anchors in the trajectory (the newest is
-  // appended by Process).
+  // appended by Process), and with them the all-frames poses.
+  std::map<int64_t, Rigid3d> corrections;  // anchor index -> new_world_from_old_world
   auto it = trajectory_.rbegin();
   for (size_t k = n - 1; k-- > 0 && it != trajectory_.rend();) {
     while (it != trajectory_.rend() && it->index > refiner_.index(k)) ++it;
     if (it != trajectory_.rend() && it->index == refiner_.index(k)) {
+      corrections[it->index] = refiner_.world_from_cam(k) * it->world_from_cam.Inverse();
       it->world_from_cam = refiner_.world_from_cam(k);
     }
+  }
+  ReviseFramePoses(corrections);
+}
+
+// A frame posed between two anchors was posed relative to them: when the
+// window moves the earlier anchor by C = new_world_from_old_world, the frame
+// moves rigidly with it (world_from_cam' = C * world_from_cam), so the frame
+// keeps its own estimate relative to that anchor. Every pose changed gets
+// revision + 1 (UpdateStream sends it again); poses before the window's
+// oldest anchor are final.
+void Pipeline::ReviseFramePoses(const std::map<int64_t, Rigid3d>& corrections) {
+  if (corrections.empty()) return;
+  const int64_t oldest = refiner_.index(0);
+  size_t i = poses_.size();
+  while (i > 0 && poses_[i - 1].pose.index >= oldest) --i;
+  first_window_pose_ = i;
+  for (; i < poses_.size(); ++i) {
+    FramePose& p = poses_[i];
+    auto c = corrections.upper_bound(p.pose.index);
+    if (c == corrections.begin()) continue;  // before the first revised anchor
+    --c;
+    p.pose.world_from_cam = c->second * p.pose.world_from_cam;
+    ++p.revision;
   }
 }
 

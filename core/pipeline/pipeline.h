@@ -150,7 +150,8 @@ class Pipeline {
   const std::vector<FramePose>& poses() const { return poses_; }
   // poses()[i] for i >= this may still be revised by later steps (the
   // revision counter of FramePose goes up); those before are final. With the
-  // filter alone nothing is revised: it is poses().size() after each step.
+  // filter alone nothing is revised: it is poses().size() after each step;
+  // with the window refiner it is the pose of the window's oldest anchor.
   size_t first_revisable_pose() const { return first_revisable_pose_; }
   // Every plane the filter ever held, by track id.
   const std::map<int, MapPlane>& plane_map() const { return plane_map_; }
@@ -179,6 +180,8 @@ class Pipeline {
   void RefineWindow(const AnchorPair& pair, PipelineStep* step);
   // kCameraHeight with the refiner: the scale from the window's road plane.
   void MaybeFixScaleFromWindowRoad(PipelineStep* step);
+  // Moves the all-frames poses with the anchors the window revised.
+  void ReviseFramePoses(const std::map<int64_t, Rigid3d>& corrections);
 
   Intrinsics intrinsics_;
   PipelineOptions options_;
@@ -193,6 +196,7 @@ class Pipeline {
   FramePoser frame_poser_;
   std::vector<FramePose> poses_;
   size_t first_revisable_pose_ = 0;
+  size_t first_window_pose_ = 0;  // poses_ index of the window's oldest anchor
 };
 
 }  // namespace slapse
