@@ -144,6 +144,10 @@ int Export(const std::string& dir) {
   if (!list.ok() || list->sessions_size() != 1) return std::fprintf(stderr, "no session\n"), 1;
   v1::GetTrajectoryRequest r;
   r.set_name(list->sessions(0).name());
+  // One unpaged answer: refused beyond 40 000 points (not the 4 MB cap).
+  auto unpaged = c->GetTrajectoryPage(r);
+  std::printf("unpaged GetTrajectory: %s\n",
+              unpaged.ok() ? "OK" : unpaged.status().ToString().c_str());
   r.set_page_size(20000);
   int64_t points = 0, pages = 0;
   double peak_rss = RssMiB();

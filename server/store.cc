@@ -279,10 +279,14 @@ StatusOr<std::vector<StoredSession>> Store::LoadSessions() {
   sqlite3_stmt* st = Prepare(
       "SELECT s.ordinal, s.proto,"
       " (SELECT IFNULL(MAX(seq), 0) FROM events e WHERE e.ordinal = s.ordinal),"
-      " (SELECT COUNT(*) FROM points p WHERE p.ordinal = s.ordinal),"
-      " MAX((SELECT IFNULL(MAX(segment), -1) FROM points p WHERE p.ordinal = s.ordinal),"
+      // Index lookups only (no scan of a long session's points): the last
+      // point has the highest number, segment and anchor index.
+      " (SELECT IFNULL(MAX(n), 0) FROM points p WHERE p.ordinal = s.ordinal),"
+      " MAX(IFNULL((SELECT segment FROM points p WHERE p.ordinal = s.ordinal"
+      "             ORDER BY n DESC LIMIT 1), -1),"
       "     (SELECT IFNULL(MAX(segment), -1) FROM planes q WHERE q.ordinal = s.ordinal)),"
-      " (SELECT IFNULL(MAX(anchor_index), -1) FROM points p WHERE p.ordinal = s.ordinal),"
+      " IFNULL((SELECT anchor_index FROM points p WHERE p.ordinal = s.ordinal"
+      "         ORDER BY n DESC LIMIT 1), -1),"
       " s.metric"
       " FROM sessions s ORDER BY s.ordinal");
   if (st == nullptr) return Error("prepare");

@@ -66,7 +66,7 @@ struct StoredSession {
   v1::Session proto;
   bool metric = false;
   uint64_t last_sequence = 0;  // of its events (0: none)
-  int64_t points = 0;          // trajectory points
+  int64_t points = 0;          // the last point's number (0: no points)
   int max_segment = -1;        // of its points and planes (-1: none)
   int64_t max_anchor_index = -1;
 };
