@@ -575,7 +575,7 @@ void FaultCatalogueTest::AddSecurityItems(std::vector<Item>* out) {
                    }});
   // The server with tokens, shared by the items below (started by the first).
   auto secure = std::make_shared<std::unique_ptr<server::SlapseServer>>();
-  auto client_with = [this, secure, tokens](const std::string& token) {
+  auto client_with = [secure, tokens](const std::string& token) {
     if (*secure == nullptr) {
       testing::WriteFileBytes(tokens,
                               "{\"tokens\": [{\"token\": \"acme-token-0123456789\", \"tenant\": "
