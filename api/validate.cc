@@ -212,13 +212,11 @@ std::string RedactText(const std::string& text) {
     out += text.substr(i, begin - i) + RedactUrl(text.substr(begin, end - begin));
     i = end;
   }
-  // "Bearer <token>" (any case) -> "Bearer ***".
-  std::string lower = out;
-  for (char& c : lower) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  // "Bearer <token>" -> "Bearer ***". The scheme as HTTP writes it
+  // (capitalised): prose such as "a bearer token:" is left alone.
   std::string masked;
   size_t from = 0;
-  for (size_t at = lower.find("bearer "); at != std::string::npos;
-       at = lower.find("bearer ", at + 7)) {
+  for (size_t at = out.find("Bearer "); at != std::string::npos; at = out.find("Bearer ", at + 7)) {
     size_t v = at + 7, e = v;
     while (e < out.size() && !stop(out[e])) ++e;
     if (e == v || out.compare(v, e - v, "***") == 0) continue;

@@ -510,7 +510,11 @@ bool ListensOnLoopbackOnly(int port) {
       std::string slot, local, remote, state;
       fields >> slot >> local >> remote >> state;
       if (state != "0A" || local.size() < 5 || local.substr(local.size() - 5) != suffix) continue;
-      (local == std::string("0100007F") + suffix ? loopback : other) = true;
+      // 127.0.0.1, or the same as a v4-mapped IPv6 address (::ffff:127.0.0.1)
+      // of a dual-stack socket, as gRPC binds it.
+      const bool is_loopback = local == std::string("0100007F") + suffix ||
+                               local == std::string("0000000000000000FFFF00000100007F") + suffix;
+      (is_loopback ? loopback : other) = true;
     }
   }
   return loopback && !other;
