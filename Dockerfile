@@ -1,8 +1,9 @@
 # slapse in a container, in two stages (docs/DEPLOY.md):
 #   build    Debian 12 + the toolchain and -dev packages (deploy/install-deps.sh --build);
 #            builds the one `slapse` binary, Release, stripped
-#   runtime  Debian 12 + only the shared libraries that binary loads
-#            (deploy/install-deps.sh --runtime); runs as the non-root user `slapse`
+#   runtime  Debian 12 + only the shared libraries that binary loads (taken from the
+#            packages of deploy/install-deps.sh --runtime in a stage between);
+#            runs as the non-root user `slapse`
 #
 #   podman build --format docker -t slapse .      # --format docker keeps the HEALTHCHECK
 #   podman run --rm -d -p 50051:50051 -p 8080:8080 -v slapse-data:/var/lib/slapse slapse
@@ -25,12 +26,30 @@ RUN --mount=type=cache,target=/ccache \
  && CCACHE_DIR=/ccache CCACHE_BASEDIR=/src cmake --build /build --target slapse -j "$(nproc)" \
  && strip -o /slapse /build/client/cli/slapse
 
-FROM debian:12 AS runtime
+# The runtime packages (deploy/install-deps.sh --runtime), installed here only to
+# take from them the shared libraries slapse loads: its ldd closure, minus what
+# the base image already has. Their Debian dependencies that slapse never loads
+# (Mesa's GL drivers and LLVM, GDAL's and PROJ's data, docs) stay behind.
+FROM debian:12 AS runtime-libs
+RUN find / -xdev \( -type f -o -type l \) -path '*/lib*' | sed 's#^/lib/#/usr/lib/#' | sort -u > /tmp/base-files
 COPY deploy/install-deps.sh /tmp/install-deps.sh
-RUN bash /tmp/install-deps.sh --runtime && rm -rf /var/lib/apt/lists/* /tmp/install-deps.sh \
+RUN bash /tmp/install-deps.sh --runtime && rm -rf /var/lib/apt/lists/*
+COPY --from=build /slapse /usr/local/bin/slapse
+RUN set -e; mkdir /closure; \
+    for lib in $(ldd /usr/local/bin/slapse | awk '/=> \// {print $3}' | sort -u); do \
+      dest="$(readlink -f "$(dirname "$lib")")/$(basename "$lib")"; \
+      grep -qxF "$dest" /tmp/base-files && continue; \
+      mkdir -p "/closure$(dirname "$dest")"; cp -L "$lib" "/closure$dest"; \
+    done; \
+    echo "runtime-libs: $(find /closure -type f | wc -l) libraries, $(du -sh /closure | cut -f1)"
+
+FROM debian:12 AS runtime
+COPY --from=runtime-libs /closure/ /
+COPY --from=build /slapse /usr/local/bin/slapse
+# Every library slapse needs must resolve, or the build fails here.
+RUN ldconfig && ! ldd /usr/local/bin/slapse | grep "not found" \
  && useradd --system --uid 10001 --user-group --home-dir /var/lib/slapse --shell /usr/sbin/nologin slapse \
  && mkdir -p /var/lib/slapse && chown slapse:slapse /var/lib/slapse
-COPY --from=build /slapse /usr/local/bin/slapse
 USER slapse
 WORKDIR /var/lib/slapse
 VOLUME /var/lib/slapse

@@ -4,7 +4,14 @@
 
 namespace slapse::server {
 
-HttpServer::HttpServer() : server_(std::make_unique<httplib::Server>()) {}
+HttpServer::HttpServer() : server_(std::make_unique<httplib::Server>()) {
+  // httplib's default also sets SO_REUSEPORT, which lets a second server bind
+  // the same port and take half the scrapes: address reuse only (restarts).
+  server_->set_socket_options([](socket_t sock) {
+    int yes = 1;
+    setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
+  });
+}
 
 HttpServer::~HttpServer() { Stop(); }
 
