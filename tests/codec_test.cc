@@ -12,7 +12,9 @@
 
 #include <gtest/gtest.h>
 
+#include "core/merge/mv_merge.h"
 #include "core/mv/mv_reader.h"
+#include "core/pipeline/pipeline.h"
 #include "tests/test_streams.h"
 
 namespace slapse {
@@ -256,6 +258,113 @@ TEST(TimestampTest, GapsAndVariableFrameRateComeFromPts) {
       EXPECT_NEAR(f.timestamp_s, want, 2e-3) << "frame " << f.index;
     }
   }
+}
+
+// A still camera (no motion at all) gives no poses, and every pipeline step
+// says why instead of a silent empty result (the session's no-poses reason
+// and `slapse run`'s "no poses" line repeat the last one).
+TEST(NoMotionTest, StillStreamSaysNoReliableMotion) {
+  for (const char* preset : {"mpeg2-ibbbp", "h264-baseline-ippp-1s"}) {
+    SCOPED_TRACE(preset);
+    auto eo = EncoderPreset(preset, 30.0);
+    ASSERT_TRUE(eo.ok());
+    const std::string path = MakeTempDir("still") + "/still.ts";
+    ASSERT_TRUE(WritePan(path, *eo, 40, 0.0, 0.0).ok());
+    auto reader = MvReader::Open(path);
+    ASSERT_TRUE(reader.ok()) << reader.status().ToString();
+    Intrinsics k;
+    k.fx_px = k.fy_px = 300;
+    k.cx_px = 159.5;
+    k.cy_px = 119.5;
+    k.width_px = 320;
+    k.height_px = 240;
+    Pipeline pipeline(k, (*reader)->info().mv_sigma_px());
+    FrameRecord f;
+    int steps = 0;
+    while ((*reader)->Next(&f).ok()) {
+      auto step = pipeline.Push(f);
+      ASSERT_TRUE(step.ok()) << step.status().ToString();
+      if (!step->has_value()) continue;
+      ++steps;
+      EXPECT_FALSE((*step)->tracking);
+      EXPECT_NE((*step)->note.find("no reliable motion"), std::string::npos) << (*step)->note;
+    }
+    EXPECT_GE(steps, 5);
+    EXPECT_TRUE(pipeline.trajectory().empty());
+  }
+}
+
+// Merged pairs of a pan stream under `uncertain`: the fraction of
+// correspondences whose displacement misses the pan's by more than 1 px (a
+// vector to another reference than the pair's earlier anchor), and how many.
+struct PairErrors {
+  int correspondences = 0, wrong = 0, from_uncertain = 0;
+};
+PairErrors MergePan(const std::string& path, MergeOptions::UncertainRefs uncertain) {
+  PairErrors out;
+  auto reader = MvReader::Open(path);
+  if (!reader.ok()) return out;
+  MergeOptions mo;
+  mo.uncertain_refs = uncertain;
+  mo.chain_min_frames = 1;  // one pair per segment: the references stay visible
+  SegmentMerger merger(320, 240, (*reader)->info().mv_sigma_px(), mo);
+  FrameRecord f;
+  while ((*reader)->Next(&f).ok()) {
+    const bool uncertain_p = f.type == PictureType::kP && !f.reference_certain;
+    auto pair = merger.Push(f);
+    if (!pair.has_value()) continue;
+    const double steps = static_cast<double>(pair->earlier_index - pair->later_index);
+    for (const Correspondence& c : pair->correspondences) {
+      const Eigen::Vector2d d = c.x_earlier_px - c.x_later_px;
+      ++out.correspondences;
+      out.from_uncertain += uncertain_p && c.n_direct > 0;
+      out.wrong += (d - steps * Eigen::Vector2d(kVx, kVy)).norm() > 1.0;
+    }
+  }
+  return out;
+}
+
+// H.264 High with a B-pyramid and 3 references (x264): the reader marks its P
+// frames' references uncertain (and not those of Baseline IPPP with one);
+// the merger never mixes them silently: kDrop uses none of their vectors,
+// kConsistent keeps fewer wrong ones than kKeep.
+TEST(ReferenceTest, BPyramidThreeRefsAreMarkedAndNotMixed) {
+  const std::string dir = MakeTempDir("refs");
+  auto bpyr = EncoderPreset("h264-high-bpyr-3ref", 30.0);
+  auto ippp = EncoderPreset("h264-baseline-ippp-1s", 30.0);
+  ASSERT_TRUE(bpyr.ok() && ippp.ok());
+  bpyr->gop_size = 60;
+  ASSERT_TRUE(WritePan(dir + "/bpyr.ts", *bpyr, 40, kVx, kVy).ok());
+  ASSERT_TRUE(WritePan(dir + "/ippp.ts", *ippp, 20, kVx, kVy).ok());
+  {
+    auto reader = MvReader::Open(dir + "/bpyr.ts");
+    ASSERT_TRUE(reader.ok());
+    Status end;
+    const std::vector<FrameRecord> frames = ReadAll(reader->get(), &end);
+    EXPECT_TRUE((*reader)->info().b_pyramid);
+    EXPECT_TRUE((*reader)->info().extra_references());
+    int uncertain_p = 0;
+    for (const FrameRecord& f : frames)
+      uncertain_p += f.type == PictureType::kP && !f.reference_certain;
+    EXPECT_GE(uncertain_p, 5);
+  }
+  {
+    auto reader = MvReader::Open(dir + "/ippp.ts");
+    ASSERT_TRUE(reader.ok());
+    Status end;
+    for (const FrameRecord& f : ReadAll(reader->get(), &end)) EXPECT_TRUE(f.reference_certain);
+  }
+  using U = MergeOptions::UncertainRefs;
+  const PairErrors keep = MergePan(dir + "/bpyr.ts", U::kKeep);
+  const PairErrors drop = MergePan(dir + "/bpyr.ts", U::kDrop);
+  const PairErrors consistent = MergePan(dir + "/bpyr.ts", U::kConsistent);
+  EXPECT_GT(keep.from_uncertain, 0);
+  EXPECT_EQ(drop.from_uncertain, 0);
+  ASSERT_GT(consistent.correspondences, 0);
+  EXPECT_LE(consistent.wrong * keep.correspondences, keep.wrong * consistent.correspondences)
+      << "consistent " << consistent.wrong << "/" << consistent.correspondences << ", keep "
+      << keep.wrong << "/" << keep.correspondences;
+  EXPECT_LT(consistent.wrong, 0.05 * consistent.correspondences);
 }
 
 TEST(PresetTest, NamesParseAndUnknownNamesListTheChoices) {

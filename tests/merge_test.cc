@@ -329,7 +329,9 @@ TEST(SegmentMergerTest, ChainsIpppVectorFieldsExactlyForAffineMotion) {
   const int cols = 10, rows = 8;  // 160 x 128
   const double s = 0.99;          // content grows 1 % a frame (driving forward)
   const Eigen::Vector2d b(0.7, -0.3), c(80, 60);
-  SegmentMerger merger(160, 128, kSigma);
+  MergeOptions chain4;
+  chain4.chain_min_frames = 4;  // chaining is off by default
+  SegmentMerger merger(160, 128, kSigma, chain4);
   std::vector<AnchorPair> pairs;
   for (int i = 0; i <= 8; ++i) {
     if (auto p = merger.Push(ZoomFrame(i, cols, rows, s, b))) pairs.push_back(*p);
@@ -369,7 +371,9 @@ TEST(SegmentMergerTest, ChainingOffKeepsOneFrameSegmentsAndIFramesBreakChains) {
   }
   EXPECT_EQ(pairs, 4);
   // With chaining, an I frame in the middle restarts the chain.
-  SegmentMerger chained(160, 128, kSigma);
+  MergeOptions on;
+  on.chain_min_frames = 4;
+  SegmentMerger chained(160, 128, kSigma, on);
   std::vector<AnchorPair> out;
   for (int i = 0; i <= 9; ++i) {
     FrameRecord f = ZoomFrame(i, 10, 8, 0.99, {0, 0});
@@ -405,7 +409,9 @@ TEST(SegmentMergerTest, ChainsARealH264IpppStreamIntoFourFrameSegments) {
   ASSERT_TRUE(testing::WritePan(path, eo, 17, vx, vy).ok());
   auto reader = MvReader::Open(path);
   ASSERT_TRUE(reader.ok());
-  SegmentMerger merger(320, 240, (*reader)->info().mv_sigma_px());
+  MergeOptions chain4;
+  chain4.chain_min_frames = 4;  // chaining is off by default
+  SegmentMerger merger(320, 240, (*reader)->info().mv_sigma_px(), chain4);
   FrameRecord f;
   std::vector<AnchorPair> pairs;
   while ((*reader)->Next(&f).ok()) {

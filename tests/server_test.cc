@@ -420,8 +420,9 @@ TEST_F(ServerTest, HevcUploadFailsWithFailedPreconditionAndServerKeepsServing) {
 // session says "re-encoded from hevc" with its cost.
 TEST_F(ServerTest, HevcUploadIsReencodedAndTracks) {
   const std::string hevc = *dir_ + "/drive_hevc.ts";
-  ASSERT_EQ(testing::RunCommand("ffmpeg -nostdin -loglevel error -y -i " + *drive_path_ +
-                                " -c:v libx265 -x265-params log-level=error:keyint=30 " + hevc),
+  ASSERT_EQ(testing::RunCommand(
+                "ffmpeg -nostdin -loglevel error -y -i " + *drive_path_ +
+                " -c:v libx265 -preset ultrafast -x265-params log-level=error:keyint=30 " + hevc),
             0);
   auto created = client_->CreateSession(UploadRequest());
   ASSERT_TRUE(created.ok()) << created.status().ToString();
