@@ -105,8 +105,12 @@ void CheckAndApply(const Pipeline& pipeline, const PipelineStep& step, const Ste
       m->poses.push_back(p);
     }
   }
-  // Without revisions the new poses are the step's own.
-  if (!u.rescaled) EXPECT_EQ(u.frame_poses.size(), step.frame_poses.size());
+  // Besides revisions, the new poses are the step's own.
+  if (!u.rescaled) {
+    size_t fresh = 0;
+    for (const FramePose& p : u.frame_poses) fresh += p.revision == 0;
+    EXPECT_EQ(fresh, step.frame_poses.size());
+  }
   for (const PlaneChange& c : u.planes) m->planes[c.track_id] = *c.plane;
 }
 
@@ -156,7 +160,11 @@ class UpdateStreamTest : public ::testing::Test {
 
   // Runs the drive through a Pipeline with `options`, checking the updates
   // after every step; returns the rescales seen.
-  void Run(const PipelineOptions& options, int* rescales) {
+  // revise_every > 0: after every that many steps, the latest FRAME pose
+  // still revisable is revised (moved by 1 cm), as a window refiner would;
+  // *revisions counts the revised poses the updates carried.
+  void Run(const PipelineOptions& options, int* rescales, int revise_every = 0,
+           int* revisions = nullptr) {
     ASSERT_NE(drive_, nullptr);
     auto reader = MvReader::Open(drive_->video_path);
     ASSERT_TRUE(reader.ok()) << reader.status().ToString();
@@ -179,6 +187,22 @@ class UpdateStreamTest : public ::testing::Test {
       const StepUpdates u = stream.Next(pipeline, **step);
       CheckAndApply(pipeline, **step, u, &mirror, rescales, &kinds);
       ExpectMirrorsPipeline(mirror, pipeline);
+      for (const FramePose& p : u.frame_poses) {
+        if (revisions != nullptr && p.revision > 0) ++*revisions;
+      }
+      if (revise_every > 0 && steps % revise_every == 0) {
+        const auto& poses = pipeline.poses();
+        for (size_t i = poses.size(); i-- > pipeline.first_revisable_pose();) {
+          if (poses[i].quality.kind != PoseKind::kFrame) continue;
+          Rigid3d moved = poses[i].pose.world_from_cam;
+          moved.translation.x() += 0.01;
+          ASSERT_TRUE(pipeline.RevisePose(i, moved).ok());
+          break;
+        }
+        if (pipeline.first_revisable_pose() > 0) {  // final poses stay final
+          EXPECT_EQ(pipeline.RevisePose(0, Rigid3d()).code(), StatusCode::kFailedPrecondition);
+        }
+      }
       if (HasFatalFailure()) return;
     }
     EXPECT_GT(steps, 5);
@@ -205,6 +229,17 @@ TEST_F(UpdateStreamTest, FixedScaleResendsTheRescaledSnapshots) {
   int rescales = 0;
   Run(o, &rescales);
   EXPECT_EQ(rescales, 1);
+}
+
+// Poses revised between steps (as a window refiner revises anchors and the
+// frames between) go out again with a higher revision and replace the
+// consumer's copy: the mirror still equals Pipeline::poses() after every step.
+TEST_F(UpdateStreamTest, RevisedPosesAreSentAgain) {
+  PipelineOptions o;
+  o.revisable_tail_poses = 12;
+  int rescales = 0, revisions = 0;
+  Run(o, &rescales, 3, &revisions);
+  EXPECT_GT(revisions, 3);
 }
 
 }  // namespace

@@ -101,7 +101,9 @@ PipelineStep Pipeline::Process(const FrontEndStep& front) {
   } else {
     frame_poser_.Skip(pair.later_index);
   }
-  first_revisable_pose_ = poses_.size();
+  const size_t tail = static_cast<size_t>(std::max(0, options_.revisable_tail_poses));
+  first_revisable_pose_ =
+      std::max(first_revisable_pose_, poses_.size() - std::min(tail, poses_.size()));
   step.metric = metric_;
   return step;
 }
@@ -270,6 +272,27 @@ void Pipeline::AddFramePoses(const AnchorPair& pair, PipelineStep* step) {
   anchor.quality = AnchorQuality(*step);
   step->frame_poses.push_back(anchor);
   poses_.insert(poses_.end(), step->frame_poses.begin(), step->frame_poses.end());
+}
+
+Status Pipeline::RevisePose(size_t i, const Rigid3d& world_from_cam) {
+  if (i >= poses_.size()) {
+    return OutOfRangeError("pose " + std::to_string(i) + " of " + std::to_string(poses_.size()));
+  }
+  if (i < first_revisable_pose_) {
+    return FailedPreconditionError("pose " + std::to_string(i) + " is final (first revisable: " +
+                                   std::to_string(first_revisable_pose_) + ")");
+  }
+  FramePose& p = poses_[i];
+  p.pose.world_from_cam = world_from_cam;
+  ++p.revision;
+  auto anchor = std::lower_bound(trajectory_.begin(), trajectory_.end(), p.pose.index,
+                                 [](const TimedPose& t, int64_t index) { return t.index < index; });
+  if (anchor != trajectory_.end() && anchor->index == p.pose.index) {
+    anchor->world_from_cam = world_from_cam;
+    // The next step continues from the latest anchor.
+    if (anchor + 1 == trajectory_.end()) world_from_cam_ = world_from_cam;
+  }
+  return Status::Ok();
 }
 
 }  // namespace slapse

@@ -55,6 +55,10 @@ struct PipelineOptions : FrontEndOptions {
   int min_planes_to_initialise = 1;
   // Poses of the frames between anchors (core/pipeline/frame_poses.h).
   FramePoserOptions frame_poses;
+  // How many of the latest poses stay revisable after a step
+  // (Pipeline::first_revisable_pose); 0: every pose is final once reported.
+  // A window refiner sets it to cover its window.
+  int revisable_tail_poses = 0;
 };
 
 // A plane as the map holds it: world frame, with its history.
@@ -129,10 +133,16 @@ class Pipeline {
   // Every posed frame in display order, anchors included, with its quality
   // (the trajectory `run` writes and the service reports).
   const std::vector<FramePose>& poses() const { return poses_; }
-  // poses()[i] for i >= this may still be revised by later steps (the
-  // revision counter of FramePose goes up); those before are final. With the
-  // filter alone nothing is revised: it is poses().size() after each step.
+  // poses()[i] for i >= this may still be revised (RevisePose); those
+  // before are final. Never decreases. After each step it is
+  // poses().size() - revisable_tail_poses (or where it was, if later).
   size_t first_revisable_pose() const { return first_revisable_pose_; }
+  // Replaces poses()[i]'s pose (e.g. a window refinement moved an anchor,
+  // and with it the frames between): its revision goes up, an anchor's entry
+  // in trajectory() follows, and UpdateStream sends it again.
+  // FAILED_PRECONDITION for a final pose (i < first_revisable_pose()),
+  // OUT_OF_RANGE past the end.
+  Status RevisePose(size_t i, const Rigid3d& world_from_cam);
   // Every plane the filter ever held, by track id.
   const std::map<int, MapPlane>& plane_map() const { return plane_map_; }
   bool metric() const { return metric_; }
