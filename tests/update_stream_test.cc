@@ -242,5 +242,45 @@ TEST_F(UpdateStreamTest, RevisedPosesAreSentAgain) {
   EXPECT_GT(revisions, 3);
 }
 
+// A loss (the stream breaks off and 12 frames never arrive): the trajectory
+// restarts in the same world on a later pair, and the anchor it restarts on
+// says so (gap_frames = the frames without a pose before it, a note) instead
+// of a silent gap.
+TEST_F(UpdateStreamTest, ALossIsAVisibleRestart) {
+  ASSERT_NE(drive_, nullptr);
+  auto reader = MvReader::Open(drive_->video_path);
+  ASSERT_TRUE(reader.ok()) << reader.status().ToString();
+  const StreamInfo& info = (*reader)->info();
+  Intrinsics k = drive_->intrinsics;
+  k.width_px = info.width_px;
+  k.height_px = info.height_px;
+  Pipeline pipeline(k, info.mv_sigma_px());
+  FrameRecord frame;
+  bool broke = false;
+  int64_t last_posed_before = -1;
+  while ((*reader)->Next(&frame).ok()) {
+    if (!broke && frame.index == 40) {
+      ASSERT_FALSE(pipeline.poses().empty());
+      last_posed_before = pipeline.poses().back().pose.index;
+      pipeline.Break();
+      broke = true;
+    }
+    if (broke && frame.index < 52) continue;  // lost
+    ASSERT_TRUE(pipeline.Push(frame).ok());
+  }
+  ASSERT_TRUE(broke);
+  int restarts = 0;
+  for (const FramePose& p : pipeline.poses()) {
+    if (p.pose.index <= last_posed_before || p.quality.gap_frames == 0) continue;
+    ++restarts;
+    EXPECT_GE(p.pose.index, 52);
+    EXPECT_EQ(p.quality.gap_frames, p.pose.index - last_posed_before - 1);
+    EXPECT_NE(p.quality.note.find("re-initialised"), std::string::npos) << p.quality.note;
+  }
+  EXPECT_EQ(restarts, 1);
+  // It goes on after the restart.
+  EXPECT_GT(pipeline.poses().back().pose.index, 70);
+}
+
 }  // namespace
 }  // namespace slapse
