@@ -93,12 +93,12 @@ void RunOne(uint64_t seed, const Drive& d, const slapse::FramePoseOptions& fo,
   }
   std::printf(
       "| %llu | %.3g | %.2g | %.2g | %ld | %zu | %.3f | %.3f (%d) | %.3f | %.4f | %.4f | %.3f | "
-      "%.3f | %.3f | %d | %.3f | %.1f %% |\n",
+      "%.3f | %.3f | %d | %.3f | %.3f | %.1f %% |\n",
       static_cast<unsigned long long>(seed), fo.prior_rotation_rad, fo.prior_position_rel,
       fo.extra_sigma_px, frames, pipeline.poses().size(), e->anchor.rmse_m, e->frame.rmse_m,
       e->frame.poses, e->frame_baseline.rmse_m, e->frame_local.rmse_m,
       e->frame_baseline_local.rmse_m, e->anchors.rpe_rot_rmse_deg, e->frame_local.rot_rmse_deg,
-      e->frame_baseline_local.rot_rmse_deg, e->interpolated.poses, e->all.max_m,
+      e->frame_baseline_local.rot_rmse_deg, e->interpolated.poses, e->anchor.max_m, e->all.max_m,
       stage_ms > 0 ? 100.0 * frame_ms / stage_ms : 0.0);
   std::fflush(stdout);
 }
@@ -106,10 +106,14 @@ void RunOne(uint64_t seed, const Drive& d, const slapse::FramePoseOptions& fo,
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string seeds = "1,2,3", dir = "/tmp/frame_pose_accuracy", prior_rot = "0.01", extra = "1.0",
-              prior_pos = "0";
+  // The settings default to FramePoseOptions' own.
+  const slapse::FramePoseOptions defaults;
+  std::string seeds = "1,2,3", dir = "/tmp/frame_pose_accuracy",
+              prior_rot = std::to_string(defaults.prior_rotation_rad),
+              extra = std::to_string(defaults.extra_sigma_px),
+              prior_pos = std::to_string(defaults.prior_position_rel);
   double duration_s = 5.0;
-  int min_inliers = slapse::FramePoseOptions().min_inliers;
+  int min_inliers = defaults.min_inliers;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string a = argv[i], v = argv[i + 1];
     if (a == "--seeds")
@@ -135,10 +139,10 @@ int main(int argc, char** argv) {
   std::printf(
       "| seed | prior rot | prior pos | extra sigma | frames | poses | anchors RMSE m | FRAME "
       "RMSE m (n) | same frames interpolated m | FRAME local m | interpolated local m | anchors "
-      "RPE rot deg | FRAME local rot deg | interpolated local rot deg | INTERPOLATED | max error m "
-      "| frame-pose "
-      "share of stage time |\n"
-      "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+      "RPE rot deg | FRAME local rot deg | interpolated local rot deg | INTERPOLATED | anchors max "
+      "error m | max error m | frame-pose share of stage time |\n"
+      "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+      "\n");
   for (double seed_d : ParseList(seeds)) {
     const uint64_t seed = static_cast<uint64_t>(seed_d);
     Drive d;

@@ -398,5 +398,42 @@ TEST(ValidateTest, ReconnectPolicySdpAndPath) {
   EXPECT_FALSE(api::ValidateSourceTimeouts(-1, 0, "rtsp_push").ok());
 }
 
+// A per-frame pose and its quality survive FramePose and Trajectory.Point
+// both ways, every kind (the wire enum shares the core enum's values).
+TEST(FramePoseRoundTrip, EveryKindAndField) {
+  for (PoseKind kind :
+       {PoseKind::kAnchor, PoseKind::kFrame, PoseKind::kInterpolated, PoseKind::kCoasting}) {
+    FramePose p;
+    p.pose.index = 42;
+    p.pose.timestamp_s = 1.4;
+    p.pose.world_from_cam =
+        Rigid3d(Eigen::Quaterniond(0.9, 0.1, -0.3, 0.2).normalized(), Eigen::Vector3d(1, -2, 3));
+    p.quality.kind = kind;
+    p.quality.position_sigma = 0.0125;
+    p.quality.inliers = 812;
+    p.quality.rms_px = 0.9;
+    p.quality.gap_frames = 7;
+    p.quality.note = "interpolated: too few inliers (3 of 40)";
+    p.revision = 2;
+    for (const FramePose& q : {api::FramePoseFromProto(api::FramePoseToProto(p)),
+                               api::FramePoseFromPoint(api::FramePoseToPoint(p))}) {
+      EXPECT_EQ(q.pose.index, p.pose.index);
+      EXPECT_EQ(q.pose.timestamp_s, p.pose.timestamp_s);
+      EXPECT_EQ(q.pose.world_from_cam.translation, p.pose.world_from_cam.translation);
+      EXPECT_EQ(q.pose.world_from_cam.rotation.coeffs(), p.pose.world_from_cam.rotation.coeffs());
+      EXPECT_EQ(q.quality.kind, kind);
+      EXPECT_EQ(q.quality.position_sigma, p.quality.position_sigma);
+      EXPECT_EQ(q.quality.inliers, p.quality.inliers);
+      EXPECT_EQ(q.quality.rms_px, p.quality.rms_px);
+      EXPECT_EQ(q.quality.gap_frames, p.quality.gap_frames);
+      EXPECT_EQ(q.quality.note, p.quality.note);
+      EXPECT_EQ(q.revision, p.revision);
+    }
+    EXPECT_EQ(static_cast<int>(api::PoseQualityToProto(p.quality).kind()), static_cast<int>(kind));
+  }
+  // A point of a server without per-frame poses reads as an anchor.
+  EXPECT_EQ(api::FramePoseFromPoint(v1::Trajectory::Point()).quality.kind, PoseKind::kAnchor);
+}
+
 }  // namespace
 }  // namespace slapse

@@ -105,8 +105,12 @@ void CheckAndApply(const Pipeline& pipeline, const PipelineStep& step, const Ste
       m->poses.push_back(p);
     }
   }
-  // Without revisions the new poses are the step's own.
-  if (!u.rescaled) EXPECT_EQ(u.frame_poses.size(), step.frame_poses.size());
+  // Besides revisions, the new poses are the step's own.
+  if (!u.rescaled) {
+    size_t fresh = 0;
+    for (const FramePose& p : u.frame_poses) fresh += p.revision == 0;
+    EXPECT_EQ(fresh, step.frame_poses.size());
+  }
   for (const PlaneChange& c : u.planes) m->planes[c.track_id] = *c.plane;
 }
 
@@ -156,7 +160,11 @@ class UpdateStreamTest : public ::testing::Test {
 
   // Runs the drive through a Pipeline with `options`, checking the updates
   // after every step; returns the rescales seen.
-  void Run(const PipelineOptions& options, int* rescales) {
+  // revise_every > 0: after every that many steps, the latest FRAME pose
+  // still revisable is revised (moved by 1 cm), as a window refiner would;
+  // *revisions counts the revised poses the updates carried.
+  void Run(const PipelineOptions& options, int* rescales, int revise_every = 0,
+           int* revisions = nullptr) {
     ASSERT_NE(drive_, nullptr);
     auto reader = MvReader::Open(drive_->video_path);
     ASSERT_TRUE(reader.ok()) << reader.status().ToString();
@@ -179,6 +187,22 @@ class UpdateStreamTest : public ::testing::Test {
       const StepUpdates u = stream.Next(pipeline, **step);
       CheckAndApply(pipeline, **step, u, &mirror, rescales, &kinds);
       ExpectMirrorsPipeline(mirror, pipeline);
+      for (const FramePose& p : u.frame_poses) {
+        if (revisions != nullptr && p.revision > 0) ++*revisions;
+      }
+      if (revise_every > 0 && steps % revise_every == 0) {
+        const auto& poses = pipeline.poses();
+        for (size_t i = poses.size(); i-- > pipeline.first_revisable_pose();) {
+          if (poses[i].quality.kind != PoseKind::kFrame) continue;
+          Rigid3d moved = poses[i].pose.world_from_cam;
+          moved.translation.x() += 0.01;
+          ASSERT_TRUE(pipeline.RevisePose(i, moved).ok());
+          break;
+        }
+        if (pipeline.first_revisable_pose() > 0) {  // final poses stay final
+          EXPECT_EQ(pipeline.RevisePose(0, Rigid3d()).code(), StatusCode::kFailedPrecondition);
+        }
+      }
       if (HasFatalFailure()) return;
     }
     EXPECT_GT(steps, 5);
@@ -205,6 +229,57 @@ TEST_F(UpdateStreamTest, FixedScaleResendsTheRescaledSnapshots) {
   int rescales = 0;
   Run(o, &rescales);
   EXPECT_EQ(rescales, 1);
+}
+
+// Poses revised between steps (as a window refiner revises anchors and the
+// frames between) go out again with a higher revision and replace the
+// consumer's copy: the mirror still equals Pipeline::poses() after every step.
+TEST_F(UpdateStreamTest, RevisedPosesAreSentAgain) {
+  PipelineOptions o;
+  o.revisable_tail_poses = 12;
+  int rescales = 0, revisions = 0;
+  Run(o, &rescales, 3, &revisions);
+  EXPECT_GT(revisions, 3);
+}
+
+// A loss (the stream breaks off and 12 frames never arrive): the trajectory
+// restarts in the same world on a later pair, and the anchor it restarts on
+// says so (gap_frames = the frames without a pose before it, a note) instead
+// of a silent gap.
+TEST_F(UpdateStreamTest, ALossIsAVisibleRestart) {
+  ASSERT_NE(drive_, nullptr);
+  auto reader = MvReader::Open(drive_->video_path);
+  ASSERT_TRUE(reader.ok()) << reader.status().ToString();
+  const StreamInfo& info = (*reader)->info();
+  Intrinsics k = drive_->intrinsics;
+  k.width_px = info.width_px;
+  k.height_px = info.height_px;
+  Pipeline pipeline(k, info.mv_sigma_px());
+  FrameRecord frame;
+  bool broke = false;
+  int64_t last_posed_before = -1;
+  while ((*reader)->Next(&frame).ok()) {
+    if (!broke && frame.index == 40) {
+      ASSERT_FALSE(pipeline.poses().empty());
+      last_posed_before = pipeline.poses().back().pose.index;
+      pipeline.Break();
+      broke = true;
+    }
+    if (broke && frame.index < 52) continue;  // lost
+    ASSERT_TRUE(pipeline.Push(frame).ok());
+  }
+  ASSERT_TRUE(broke);
+  int restarts = 0;
+  for (const FramePose& p : pipeline.poses()) {
+    if (p.pose.index <= last_posed_before || p.quality.gap_frames == 0) continue;
+    ++restarts;
+    EXPECT_GE(p.pose.index, 52);
+    EXPECT_EQ(p.quality.gap_frames, p.pose.index - last_posed_before - 1);
+    EXPECT_NE(p.quality.note.find("re-initialised"), std::string::npos) << p.quality.note;
+  }
+  EXPECT_EQ(restarts, 1);
+  // It goes on after the restart.
+  EXPECT_GT(pipeline.poses().back().pose.index, 70);
 }
 
 }  // namespace

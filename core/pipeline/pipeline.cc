@@ -112,11 +112,17 @@ PipelineStep Pipeline::Process(const FrontEndStep& front) {
   } else {
     frame_poser_.Skip(pair.later_index);
   }
-  // Without the refiner nothing is revised; with it, the poses from the
-  // window's oldest anchor on may still move.
-  first_revisable_pose_ = options_.window_refine && refiner_.size() > 0
-                              ? std::min(first_window_pose_, poses_.size())
-                              : poses_.size();
+  // Poses before first_revisable_pose_ are final (it never decreases). With
+  // the window refiner the poses from the window's oldest anchor on may still
+  // move; otherwise the last revisable_tail_poses.
+  if (options_.window_refine && refiner_.size() > 0) {
+    first_revisable_pose_ =
+        std::max(first_revisable_pose_, std::min(first_window_pose_, poses_.size()));
+  } else {
+    const size_t tail = static_cast<size_t>(std::max(0, options_.revisable_tail_poses));
+    first_revisable_pose_ =
+        std::max(first_revisable_pose_, poses_.size() - std::min(tail, poses_.size()));
+  }
   step.metric = metric_;
   return step;
 }
@@ -358,7 +364,7 @@ void Pipeline::ReviseFramePoses(const std::map<int64_t, Rigid3d>& corrections) {
   size_t i = poses_.size();
   while (i > 0 && poses_[i - 1].pose.index >= oldest) --i;
   first_window_pose_ = i;
-  for (; i < poses_.size(); ++i) {
+  for (i = std::max(i, first_revisable_pose_); i < poses_.size(); ++i) {
     FramePose& p = poses_[i];
     auto c = corrections.upper_bound(p.pose.index);
     if (c == corrections.begin()) continue;  // before the first revised anchor
@@ -383,6 +389,27 @@ void Pipeline::MaybeFixScaleFromWindowRoad(PipelineStep* step) {
   metric_ = true;
   step->scale_note = "metric: camera height over the road seen in " + std::to_string(r.road_pairs) +
                      " window pairs";
+}
+
+Status Pipeline::RevisePose(size_t i, const Rigid3d& world_from_cam) {
+  if (i >= poses_.size()) {
+    return OutOfRangeError("pose " + std::to_string(i) + " of " + std::to_string(poses_.size()));
+  }
+  if (i < first_revisable_pose_) {
+    return FailedPreconditionError("pose " + std::to_string(i) + " is final (first revisable: " +
+                                   std::to_string(first_revisable_pose_) + ")");
+  }
+  FramePose& p = poses_[i];
+  p.pose.world_from_cam = world_from_cam;
+  ++p.revision;
+  auto anchor = std::lower_bound(trajectory_.begin(), trajectory_.end(), p.pose.index,
+                                 [](const TimedPose& t, int64_t index) { return t.index < index; });
+  if (anchor != trajectory_.end() && anchor->index == p.pose.index) {
+    anchor->world_from_cam = world_from_cam;
+    // The next step continues from the latest anchor.
+    if (anchor + 1 == trajectory_.end()) world_from_cam_ = world_from_cam;
+  }
+  return Status::Ok();
 }
 
 }  // namespace slapse

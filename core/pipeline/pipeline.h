@@ -66,6 +66,10 @@ struct PipelineOptions : FrontEndOptions {
   // predictor. Off: the EKF's poses as they are.
   bool window_refine = true;
   WindowRefinerOptions refine;
+  // How many of the latest poses stay revisable after a step
+  // (Pipeline::first_revisable_pose); 0: every pose is final once reported.
+  // A window refiner sets it to cover its window.
+  int revisable_tail_poses = 0;
 };
 
 // A plane as the map holds it: world frame, with its history.
@@ -148,11 +152,18 @@ class Pipeline {
   // Every posed frame in display order, anchors included, with its quality
   // (the trajectory `run` writes and the service reports).
   const std::vector<FramePose>& poses() const { return poses_; }
-  // poses()[i] for i >= this may still be revised by later steps (the
-  // revision counter of FramePose goes up); those before are final. With the
-  // filter alone nothing is revised: it is poses().size() after each step;
-  // with the window refiner it is the pose of the window's oldest anchor.
+  // poses()[i] for i >= this may still be revised (RevisePose, or the window
+  // refiner moving its anchors); those before are final. Never decreases.
+  // After each step it is the pose of the window refiner's oldest anchor, or
+  // without the refiner poses().size() - revisable_tail_poses (or where it
+  // was, if later).
   size_t first_revisable_pose() const { return first_revisable_pose_; }
+  // Replaces poses()[i]'s pose (e.g. a window refinement moved an anchor,
+  // and with it the frames between): its revision goes up, an anchor's entry
+  // in trajectory() follows, and UpdateStream sends it again.
+  // FAILED_PRECONDITION for a final pose (i < first_revisable_pose()),
+  // OUT_OF_RANGE past the end.
+  Status RevisePose(size_t i, const Rigid3d& world_from_cam);
   // Every plane the filter ever held, by track id.
   const std::map<int, MapPlane>& plane_map() const { return plane_map_; }
   bool metric() const { return metric_; }

@@ -67,7 +67,9 @@ struct StepUpdates {
   bool rescaled = false;
   bool metric = false;                                 // lengths are metres
   const std::map<int, MapPlane>* plane_map = nullptr;  // set when rescaled; as `plane`
-  std::vector<TimedPose> new_points;  // trajectory points added since the last update
+  // Trajectory points added since the last update (anchors; a revised
+  // anchor is not sent again here: see frame_poses).
+  std::vector<TimedPose> new_points;
 
   // The all-frames trajectory (Pipeline::poses()): the poses added or
   // revised since the last update, in display order. A consumer appends a
