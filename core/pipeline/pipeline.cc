@@ -272,15 +272,10 @@ void Pipeline::RefineWindow(const AnchorPair& pair, PipelineStep* step) {
       (refiner_.world_from_cam(n - 1).translation - refiner_.world_from_cam(n - 2).translation)
           .norm();
   if (ekf_length > 0 && refined_length > 0) ekf_.Rescale(refined_length / ekf_length);
-  // Revise the window's earlier anchors in the trajectory (the newest is
-  // appended by Process).
-  auto it = trajectory_.rbegin();
-  for (size_t k = n - 1; k-- > 0 && it != trajectory_.rend();) {
-    while (it != trajectory_.rend() && it->index > refiner_.index(k)) ++it;
-    if (it != trajectory_.rend() && it->index == refiner_.index(k)) {
-      it->world_from_cam = refiner_.world_from_cam(k);
-    }
-  }
+  // The window's earlier anchors are not revised in trajectory(): a pose is
+  // final once a step emitted it (the update stream's clients and the files
+  // of `slapse run` hold the same poses). Each is the refined newest pose of
+  // its step (a filter, lag 0); the refined older poses serve the next solves.
 }
 
 void Pipeline::MaybeFixScaleFromWindowRoad(PipelineStep* step) {

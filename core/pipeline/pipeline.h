@@ -107,7 +107,8 @@ struct PipelineStep {
   std::vector<PlaneTrack> planes;
   UpdateReport ekf;
   // The window refiner's solve (solved = false when it is off or did not run).
-  // A solve revises the poses of the window's earlier anchors in trajectory().
+  // world_from_cam is the refined pose of the newest anchor; earlier poses in
+  // trajectory() are not revised (final once emitted, as clients saw them).
   WindowRefineReport refine;
   // Whether the metric scale is observable (empty up to scale): e.g. "metric:
   // camera height 1.50 m over the road seen in 5 of 5 window pairs" or
