@@ -112,17 +112,12 @@ PipelineStep Pipeline::Process(const FrontEndStep& front) {
   } else {
     frame_poser_.Skip(pair.later_index);
   }
-  // Poses before first_revisable_pose_ are final (it never decreases). With
-  // the window refiner the poses from the window's oldest anchor on may still
-  // move; otherwise the last revisable_tail_poses.
-  if (options_.window_refine && refiner_.size() > 0) {
-    first_revisable_pose_ =
-        std::max(first_revisable_pose_, std::min(first_window_pose_, poses_.size()));
-  } else {
-    const size_t tail = static_cast<size_t>(std::max(0, options_.revisable_tail_poses));
-    first_revisable_pose_ =
-        std::max(first_revisable_pose_, poses_.size() - std::min(tail, poses_.size()));
-  }
+  // Poses before first_revisable_pose_ are final (it never decreases); the
+  // last revisable_tail_poses stay open (0: none; the window refiner does not
+  // revise emitted poses, see RefineWindow).
+  const size_t tail = static_cast<size_t>(std::max(0, options_.revisable_tail_poses));
+  first_revisable_pose_ =
+      std::max(first_revisable_pose_, poses_.size() - std::min(tail, poses_.size()));
   step.metric = metric_;
   return step;
 }
@@ -338,40 +333,10 @@ void Pipeline::RefineWindow(const AnchorPair& pair, PipelineStep* step) {
       (refiner_.world_from_cam(n - 1).translation - refiner_.world_from_cam(n - 2).translation)
           .norm();
   if (ekf_length > 0 && refined_length > 0) ekf_.Rescale(refined_length / ekf_length);
-  // Revise the window's earlier anchors in the trajectory (the newest is
-  // appended by Process), and with them the all-frames poses.
-  std::map<int64_t, Rigid3d> corrections;  // anchor index -> new_world_from_old_world
-  auto it = trajectory_.rbegin();
-  for (size_t k = n - 1; k-- > 0 && it != trajectory_.rend();) {
-    while (it != trajectory_.rend() && it->index > refiner_.index(k)) ++it;
-    if (it != trajectory_.rend() && it->index == refiner_.index(k)) {
-      corrections[it->index] = refiner_.world_from_cam(k) * it->world_from_cam.Inverse();
-      it->world_from_cam = refiner_.world_from_cam(k);
-    }
-  }
-  ReviseFramePoses(corrections);
-}
-
-// A frame posed between two anchors was posed relative to them: when the
-// window moves the earlier anchor by C = new_world_from_old_world, the frame
-// moves rigidly with it (world_from_cam' = C * world_from_cam), so the frame
-// keeps its own estimate relative to that anchor. Every pose changed gets
-// revision + 1 (UpdateStream sends it again); poses before the window's
-// oldest anchor are final.
-void Pipeline::ReviseFramePoses(const std::map<int64_t, Rigid3d>& corrections) {
-  if (corrections.empty()) return;
-  const int64_t oldest = refiner_.index(0);
-  size_t i = poses_.size();
-  while (i > 0 && poses_[i - 1].pose.index >= oldest) --i;
-  first_window_pose_ = i;
-  for (i = std::max(i, first_revisable_pose_); i < poses_.size(); ++i) {
-    FramePose& p = poses_[i];
-    auto c = corrections.upper_bound(p.pose.index);
-    if (c == corrections.begin()) continue;  // before the first revised anchor
-    --c;
-    p.pose.world_from_cam = c->second * p.pose.world_from_cam;
-    ++p.revision;
-  }
+  // The window's earlier anchors are not revised in trajectory(): a pose is
+  // final once a step emitted it (the update stream's clients and the files
+  // of `slapse run` hold the same poses). Each is the refined newest pose of
+  // its step (a filter, lag 0); the refined older poses serve the next solves.
 }
 
 void Pipeline::MaybeFixScaleFromWindowRoad(PipelineStep* step) {

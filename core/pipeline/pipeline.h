@@ -115,7 +115,8 @@ struct PipelineStep {
   std::vector<PlaneTrack> planes;
   UpdateReport ekf;
   // The window refiner's solve (solved = false when it is off or did not run).
-  // A solve revises the poses of the window's earlier anchors in trajectory().
+  // world_from_cam is the refined pose of the newest anchor; earlier poses in
+  // trajectory() are not revised (final once emitted, as clients saw them).
   WindowRefineReport refine;
   // Whether the metric scale is observable (empty up to scale): e.g. "metric:
   // camera height 1.50 m over the road seen in 5 of 5 window pairs" or
@@ -152,11 +153,9 @@ class Pipeline {
   // Every posed frame in display order, anchors included, with its quality
   // (the trajectory `run` writes and the service reports).
   const std::vector<FramePose>& poses() const { return poses_; }
-  // poses()[i] for i >= this may still be revised (RevisePose, or the window
-  // refiner moving its anchors); those before are final. Never decreases.
-  // After each step it is the pose of the window refiner's oldest anchor, or
-  // without the refiner poses().size() - revisable_tail_poses (or where it
-  // was, if later).
+  // poses()[i] for i >= this may still be revised (RevisePose); those
+  // before are final. Never decreases. After each step it is
+  // poses().size() - revisable_tail_poses (or where it was, if later).
   size_t first_revisable_pose() const { return first_revisable_pose_; }
   // Replaces poses()[i]'s pose (e.g. a window refinement moved an anchor,
   // and with it the frames between): its revision goes up, an anchor's entry
@@ -191,8 +190,6 @@ class Pipeline {
   void RefineWindow(const AnchorPair& pair, PipelineStep* step);
   // kCameraHeight with the refiner: the scale from the window's road plane.
   void MaybeFixScaleFromWindowRoad(PipelineStep* step);
-  // Moves the all-frames poses with the anchors the window revised.
-  void ReviseFramePoses(const std::map<int64_t, Rigid3d>& corrections);
 
   Intrinsics intrinsics_;
   PipelineOptions options_;
@@ -207,7 +204,6 @@ class Pipeline {
   FramePoser frame_poser_;
   std::vector<FramePose> poses_;
   size_t first_revisable_pose_ = 0;
-  size_t first_window_pose_ = 0;  // poses_ index of the window's oldest anchor
 };
 
 }  // namespace slapse
