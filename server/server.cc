@@ -5,6 +5,8 @@
 #include <grpcpp/security/server_credentials.h>
 #include <grpcpp/server_builder.h>
 
+#include "server/dashboard.h"
+
 namespace slapse::server {
 namespace {
 
@@ -36,6 +38,7 @@ Status SlapseServer::StartHttp() {
   http_->Get("/healthz", [](const HttpRequest&) {
     return HttpResponse{200, "text/plain", "ok\n"};
   });
+  MountDashboard(http_.get(), &manager_, auth_.get());
   return http_->Start(options_.address,
                       options_.http_port == ServerOptions::kAnyFreePort ? 0 : options_.http_port);
 }
