@@ -53,6 +53,10 @@ struct HttpRequest {
 using HttpWrite = std::function<bool(const std::string& chunk)>;
 
 struct HttpResponse {
+  HttpResponse() = default;
+  HttpResponse(int status, std::string content_type, std::string body)
+      : status(status), content_type(std::move(content_type)), body(std::move(body)) {}
+
   int status = 200;
   std::string content_type = "text/plain; charset=utf-8";
   std::string body;

@@ -107,10 +107,10 @@ TEST_F(DashboardApiTest, NothingWithoutATokenAndNoSessionAcrossTenants) {
   const std::string a = FinishedUpload(a_.get());
   const std::string b = FinishedUpload(b_.get());
   // No token: every /api route is 401 with an ErrorStatus; the page is the login form.
-  for (const std::string path :
-       {"/api/sessions", "/api/session?name=" + Q(a), "/api/trajectory?name=" + Q(a),
-        "/api/planes?name=" + Q(a), "/api/download?format=tum&name=" + Q(a),
-        "/api/events?name=" + Q(a)}) {
+  for (const std::string& path : std::vector<std::string>{
+           "/api/sessions", "/api/session?name=" + Q(a), "/api/trajectory?name=" + Q(a),
+           "/api/planes?name=" + Q(a), "/api/download?format=tum&name=" + Q(a),
+           "/api/events?name=" + Q(a)}) {
     auto r = Get(path);
     ASSERT_TRUE(r);
     EXPECT_EQ(r->status, 401) << path;
@@ -277,7 +277,8 @@ TEST_F(DashboardApiTest, CameraCredentialsNeverLeave) {
   auto s = a_->CreateSession(r);
   ASSERT_TRUE(s.ok()) << s.status().ToString();
   std::this_thread::sleep_for(std::chrono::milliseconds(300));  // let it fail and log why
-  for (const std::string path : {"/api/sessions", "/api/session?name=" + Q(s->name())}) {
+  for (const std::string& path :
+       std::vector<std::string>{"/api/sessions", "/api/session?name=" + Q(s->name())}) {
     auto got = Get(path, kTokenA);
     ASSERT_EQ(got->status, 200);
     EXPECT_NE(got->body.find("127.0.0.1:9"), std::string::npos) << got->body;
