@@ -173,7 +173,13 @@ HttpResponse AssetResponse(const WebAsset& a, int status = 200) {
 
 StatusOr<Caller> Dashboard::Authorize(const HttpRequest& r, const std::string& op) const {
   if (auth_ == nullptr) return Caller{};
-  auto caller = auth_->AuthenticateToken(TokenOf(r));
+  const std::string token = TokenOf(r);
+  if (AuthOn() && token.empty()) {
+    return Status(kUnauthenticated,
+                  "this server requires a token: sign in at / or send 'Authorization: Bearer "
+                  "<token>'");
+  }
+  auto caller = auth_->AuthenticateToken(token);
   if (!caller.ok()) return caller.status();
   if (!op.empty()) SLAPSE_RETURN_IF_ERROR(Authenticator::CheckMayWrite(*caller, op));
   return caller;
