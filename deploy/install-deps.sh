@@ -60,7 +60,13 @@ TEST_PACKAGES=(
   # tests: promtool checks the /metrics exposition; a real Prometheus scrapes a
   # real server in the `external` metrics test (tests/metrics_test.cc)
   prometheus
+  # tests: the dashboard's browser test (tests/dashboard_test.cc) drives a real headless
+  # Chromium with playwright-core from npm (tests/web/package-lock.json, `npm ci`)
+  chromium nodejs
 )
+# npm: Debian's package, unless the nodejs installed brings its own (NodeSource's does,
+# and conflicts with Debian's npm).
+if ! command -v npm >/dev/null 2>&1; then TEST_PACKAGES+=(npm); fi
 # What the slapse binary loads at run time (ldd build/client/cli/slapse, each
 # library's package): FFmpeg 5.1, OpenCV 4.6, gRPC 1.51 / protobuf 3.21.
 RUNTIME_PACKAGES=(

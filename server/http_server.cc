@@ -3,8 +3,53 @@
 #include <httplib.h>
 
 namespace slapse::server {
+namespace {
+
+// Runs `handler` on an httplib request and fills httplib's response.
+void Serve(const HttpHandler& handler, const httplib::Request& req, httplib::Response& res) {
+  HttpRequest request;
+  request.method = req.method;
+  request.path = req.path;
+  for (const auto& [k, v] : req.params) request.params.emplace(k, v);
+  for (const auto& [k, v] : req.headers) request.headers.emplace(k, v);
+  request.body = req.body;
+  HttpResponse response = handler(request);
+  res.status = response.status;
+  for (const auto& [k, v] : response.headers) res.set_header(k.c_str(), v);
+  if (!response.stream) {
+    res.set_content(std::move(response.body), response.content_type.c_str());
+    return;
+  }
+  res.set_chunked_content_provider(response.content_type, [stream = std::move(response.stream)](
+                                                              size_t, httplib::DataSink& sink) {
+    const HttpWrite write = [&sink](const std::string& chunk) {
+      return sink.is_writable() && sink.write(chunk.data(), chunk.size());
+    };
+    if (!stream(write)) sink.done();
+    return true;
+  });
+}
+
+}  // namespace
+
+std::string HttpRequest::Header(const std::string& name) const {
+  for (const auto& [k, v] : headers) {
+    if (k.size() == name.size() && std::equal(k.begin(), k.end(), name.begin(), [](char a, char b) {
+          return std::tolower(a) == std::tolower(b);
+        })) {
+      return v;
+    }
+  }
+  return "";
+}
+
+std::string HttpRequest::Param(const std::string& name) const {
+  auto it = params.find(name);
+  return it == params.end() ? "" : it->second;
+}
 
 HttpServer::HttpServer() : server_(std::make_unique<httplib::Server>()) {
+  server_->new_task_queue = [] { return new httplib::ThreadPool(kHttpThreads); };
   // httplib's default also sets SO_REUSEPORT, which lets a second server bind
   // the same port and take half the scrapes: address reuse only (restarts).
   server_->set_socket_options([](socket_t sock) {
@@ -15,22 +60,28 @@ HttpServer::HttpServer() : server_(std::make_unique<httplib::Server>()) {
 
 HttpServer::~HttpServer() { Stop(); }
 
-void HttpServer::Get(const std::string& path, HttpHandler handler) {
+std::string HttpServer::Pattern(const std::string& path) {
   // httplib matches patterns as regular expressions: quote the path's dots.
   std::string pattern;
   for (char c : path) {
     if (std::string("\\^$.|?*+()[]{}").find(c) != std::string::npos) pattern += '\\';
     pattern += c;
   }
-  server_->Get(pattern,
+  return pattern;
+}
+
+void HttpServer::Get(const std::string& path, HttpHandler handler) {
+  server_->Get(Pattern(path),
                [handler = std::move(handler)](const httplib::Request& req, httplib::Response& res) {
-                 HttpRequest request;
-                 request.path = req.path;
-                 for (const auto& [k, v] : req.params) request.params.emplace(k, v);
-                 HttpResponse response = handler(request);
-                 res.status = response.status;
-                 res.set_content(std::move(response.body), response.content_type.c_str());
+                 Serve(handler, req, res);
                });
+}
+
+void HttpServer::Post(const std::string& path, HttpHandler handler) {
+  server_->Post(Pattern(path), [handler = std::move(handler)](const httplib::Request& req,
+                                                              httplib::Response& res) {
+    Serve(handler, req, res);
+  });
 }
 
 Status HttpServer::Start(const std::string& address, int port) {

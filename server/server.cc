@@ -6,6 +6,7 @@
 #include <grpcpp/server_builder.h>
 
 #include <algorithm>
+#include "server/dashboard.h"
 
 namespace slapse::server {
 namespace {
@@ -48,6 +49,7 @@ Status SlapseServer::StartHttp() {
   http_->Get("/healthz", [](const HttpRequest&) {
     return HttpResponse{200, "text/plain", "ok\n"};
   });
+  MountDashboard(http_.get(), &manager_, auth_.get());
   return http_->Start(options_.address,
                       options_.http_port == ServerOptions::kAnyFreePort ? 0 : options_.http_port);
 }

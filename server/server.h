@@ -1,5 +1,6 @@
 // SlapseServer: the gRPC server (slapse.v1.SlapseService, health checking,
-// reflection) around a SessionManager, and its HTTP side (/metrics).
+// reflection) around a SessionManager, and its HTTP side (/metrics, the
+// dashboard: server/dashboard.h).
 //
 // Health (grpc.health.v1.Health) answers per service name: "" (the server)
 // and "slapse.v1.SlapseService" are SERVING from Start() until Shutdown().
