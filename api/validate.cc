@@ -212,6 +212,28 @@ std::string RedactText(const std::string& text) {
     out += text.substr(i, begin - i) + RedactUrl(text.substr(begin, end - begin));
     i = end;
   }
+  // name=value pairs outside URLs too (e.g. a URL cut at a space, or a
+  // "token=..." in a library's message): secret names get *** as values.
+  std::string pairs;
+  size_t last = 0;
+  for (size_t eq = out.find('='); eq != std::string::npos; eq = out.find('=', eq + 1)) {
+    size_t name = eq;
+    while (name > 0 && (std::isalnum(static_cast<unsigned char>(out[name - 1])) ||
+                        out[name - 1] == '_' || out[name - 1] == '-')) {
+      --name;
+    }
+    if (name == eq || name < last || !IsSecretParamName(out.substr(name, eq - name))) continue;
+    size_t end = eq + 1;
+    while (end < out.size() && !stop(out[end]) && out[end] != '&' && out[end] != ';' &&
+           out[end] != '#' && out[end] != ',') {
+      ++end;
+    }
+    if (end == eq + 1 || out.compare(eq + 1, end - eq - 1, "***") == 0) continue;
+    pairs += out.substr(last, eq + 1 - last) + "***";
+    last = end;
+    eq = end - 1;
+  }
+  out = pairs + out.substr(last);
   // "Bearer <token>" -> "Bearer ***". The scheme as HTTP writes it
   // (capitalised): prose such as "a bearer token:" is left alone.
   std::string masked;
@@ -245,7 +267,8 @@ void RedactEvent(v1::SessionEvent* e) {
 Status ValidateRtspUrl(const std::string& url) {
   auto bad = [&](const std::string& why) {
     return InvalidArgumentError("rtsp_pull.url '" + RedactUrl(url) + "' " + why +
-                                "; want rtsp://[user:password@]host[:port]/path or rtsps://...");
+                                "; want rtsp://host[:port]/path or rtsps://... (credentials as "
+                                "user:password@ before the host)");
   };
   if (url.empty()) return InvalidArgumentError("rtsp_pull.url is required, e.g. rtsp://cam:554/1");
   if (url.size() > kMaxRtspUrlChars) return bad("is longer than 2048 characters");

@@ -84,7 +84,9 @@ std::string RedactUrl(const std::string& url);
 // (also any name that ends in "token", "secret", "password" or "signature").
 bool IsSecretParamName(const std::string& name);
 // Free text (an error or log message): every URL in it (scheme://... up to a
-// space or quote) through RedactUrl, and "Bearer <token>" -> "Bearer ***".
+// space or quote) through RedactUrl, the value of any secret name=value pair
+// elsewhere (IsSecretParamName; up to a space, quote, & ; # or ,) and
+// "Bearer <token>" -> "Bearer ***".
 std::string RedactText(const std::string& text);
 // A response or event as it may leave the server: URLs and messages masked
 // (rtsp_pull.url, ingest_url, error, state_message; StateChange.message,

@@ -372,6 +372,12 @@ TEST(ValidateTest, RedactionMasksQuerySecretsTextAndResponses) {
   EXPECT_EQ(api::RedactText("cannot open 'rtsp://a:b@cam/1?token=x': refused; Bearer abc.def here"),
             "cannot open 'rtsp://***@cam/1?token=***': refused; Bearer *** here");
   EXPECT_EQ(api::RedactText("no url here"), "no url here");
+  EXPECT_EQ(api::RedactText("rtsp://a:b@cam x/?token=t&ch=1 and api_key=k, keyframe=3"),
+            "rtsp://***@cam x/?token=***&ch=1 and api_key=***, keyframe=3");
+  // A validation message is masked already: the server's masking of errors keeps it whole.
+  const std::string refused = api::ValidateRtspUrl("rtsp://a:b@bad host/?token=t").message();
+  EXPECT_EQ(api::RedactText(refused), refused);
+  EXPECT_EQ(refused.find("token=t"), std::string::npos) << refused;
 
   v1::Session s;
   s.mutable_rtsp_pull()->set_url("rtsp://u:pw@cam/1?key=k");
