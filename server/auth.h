@@ -38,9 +38,8 @@
 
 namespace slapse::server {
 
-// gRPC's UNAUTHENTICATED (16). core/common/status.h names codes up to
-// DATA_LOSS (15); naming 16 there rebuilds everything, so it is spelled here.
-constexpr StatusCode kUnauthenticated = static_cast<StatusCode>(16);
+// gRPC's UNAUTHENTICATED (16), as the server's code spells it.
+constexpr StatusCode kUnauthenticated = StatusCode::kUnauthenticated;
 
 struct AuthOptions {
   // PEM files of the server's certificate (chain) and private key: both or
