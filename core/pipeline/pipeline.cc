@@ -290,6 +290,8 @@ void Pipeline::AddFramePoses(const AnchorPair& pair, PipelineStep* step) {
   anchor.quality = AnchorQuality(*step);
   step->frame_poses.push_back(anchor);
   poses_.insert(poses_.end(), step->frame_poses.begin(), step->frame_poses.end());
+}
+
 // The hook of core/refine (docs/METHOD.md "Windowed refinement"). The
 // refiner's plane ids are the filter's track ids (extracted_filter_ids), its
 // initial planes the filter's, its initial pose for the new anchor the
