@@ -6,4 +6,6 @@ COPY deploy/install-deps.sh /tmp/install-deps.sh
 RUN bash /tmp/install-deps.sh --camera && rm -rf /var/lib/apt/lists/* /tmp/install-deps.sh
 COPY deploy/compose/camera.sh /usr/local/bin/camera.sh
 USER slapse
+# The camera is not a server: no health check from the slapse image.
+HEALTHCHECK NONE
 ENTRYPOINT ["bash", "/usr/local/bin/camera.sh"]
