@@ -74,7 +74,7 @@ RUNTIME_PACKAGES=(
   libopencv-core406 libopencv-imgproc406 libopencv-imgcodecs406 libopencv-calib3d406
   libgrpc++1.51 libgrpc29 libprotobuf32
   libcpp-httplib0.11 libprometheus-cpp-core1.0
-  libsqlite3-0 libssl3
+  libsqlite3-0 libssl3 libceres3
 )
 case "$MODE" in
   all) PACKAGES=("${BUILD_PACKAGES[@]}" "${TEST_PACKAGES[@]}") ;;
