@@ -298,7 +298,7 @@ TEST(ValidateTest, EnumsOutOfRangeNameTheFieldAndTheValues) {
   EXPECT_EQ(st.code(), StatusCode::kInvalidArgument);
   EXPECT_EQ(st.message(),
             "state_filter 42 is not one of STATE_UNSPECIFIED (0), CREATED (1), RUNNING (2), "
-            "FINISHED (3), FAILED (4), STOPPED (5)");
+            "FINISHED (3), FAILED (4), STOPPED (5), EXPIRED (6)");
   list.set_state_filter(v1::Session::FAILED);
   list.set_page_size(-1);
   EXPECT_EQ(api::ValidateListRequest(list).code(), StatusCode::kInvalidArgument);

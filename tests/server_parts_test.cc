@@ -74,7 +74,7 @@ TEST(SessionTest, AFinishWithoutPosesSaysTheRunnersReason) {
             "extracted");
   // With poses the message is the source's alone.
   s = NewSession();
-  s->trajectory.emplace_back();
+  s->points = 1;
   s->EndStream(OutOfRangeError("eof"), "the stream ended");
   EXPECT_EQ(s->Snapshot().state_message(), "the stream ended");
 }
@@ -172,7 +172,7 @@ TEST(IngestSourceTest, RtspPushEndsWithThePublisher) {
   end.opened = true;
   end.status = OutOfRangeError("eof");
   end.frames = end.session_frames = 10;
-  s->trajectory.emplace_back();  // it had poses (else the message says why not)
+  s->points = 1;  // it had poses (else the message says why not)
   EXPECT_FALSE(source->AfterConnection(s.get(), end).has_value());
   EXPECT_EQ(s->Snapshot().state(), v1::Session::FINISHED);
   const auto events = AllEvents(*s);
