@@ -319,8 +319,10 @@ void Pipeline::RefineWindow(const AnchorPair& pair, PipelineStep* step) {
     guesses[track.track_id] = track.pi;
     if (track.road) road_id = track.track_id;
   }
-  refiner_.Push(pair.later_index, pair.later_timestamp_s, world_from_cam_, std::move(observations),
-                guesses, road_id);
+  // The new anchor's guess: the window's newest pose and the filter's step.
+  const Rigid3d guess = refiner_.world_from_cam(refiner_.size() - 1) * ekf_.prev_from_cur();
+  refiner_.Push(pair.later_index, pair.later_timestamp_s, guess, std::move(observations), guesses,
+                road_id);
   const Status s = refiner_.Refine(&step->refine);
   if (!s.ok()) {  // the filter's pose stands; the window restarts from it
     step->note = s.ToString();
@@ -328,17 +330,18 @@ void Pipeline::RefineWindow(const AnchorPair& pair, PipelineStep* step) {
     return;
   }
   if (!step->refine.solved) return;
+  // The emitted pose: the last emitted pose composed with the window's newest
+  // step. Poses already emitted are not revised (final once a step emitted
+  // them: the update stream's clients and `slapse run`'s files hold the same
+  // poses), and taking the window's newest pose itself would put the
+  // revision of the previous anchor into this step's length.
   const size_t n = refiner_.size();
-  world_from_cam_ = refiner_.world_from_cam(n - 1);
+  const Rigid3d step_refined =
+      refiner_.world_from_cam(n - 2).Inverse() * refiner_.world_from_cam(n - 1);
+  world_from_cam_ = trajectory_.back().world_from_cam * step_refined;
   const double ekf_length = ekf_.prev_from_cur().translation.norm();
-  const double refined_length =
-      (refiner_.world_from_cam(n - 1).translation - refiner_.world_from_cam(n - 2).translation)
-          .norm();
+  const double refined_length = step_refined.translation.norm();
   if (ekf_length > 0 && refined_length > 0) ekf_.Rescale(refined_length / ekf_length);
-  // The window's earlier anchors are not revised in trajectory(): a pose is
-  // final once a step emitted it (the update stream's clients and the files
-  // of `slapse run` hold the same poses). Each is the refined newest pose of
-  // its step (a filter, lag 0); the refined older poses serve the next solves.
 }
 
 void Pipeline::MaybeFixScaleFromWindowRoad(PipelineStep* step) {
