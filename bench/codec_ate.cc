@@ -4,7 +4,7 @@
 // re-encode settings). Prints one Markdown row per (preset, seed) and the
 // mean ATE as % of distance per preset. Drives are cached in OUT/<preset>/seed<N>.
 //
-//   build/bench/codec_ate --out out/codec_ate --seeds 1,2,3,4,5 --duration-s 5 \
+//   build/bench/codec_ate --out out/codec_ate --seeds 1,2,3,4,5 --duration-s 5
 //       --presets mpeg2-ibbbp,h264-baseline-ippp-2s [--uncertain-refs keep|drop|consistent]
 //       [--reencode-q 4 --reencode-gop 12 --reencode-b 3 --reencode-dia 4]
 //       [--chain-min-frames 4]

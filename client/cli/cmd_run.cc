@@ -288,7 +288,9 @@ int RunRun(int argc, char** argv) {
     std::fprintf(stderr, "slapse run: %s (results up to there)\n", end.ToString().c_str());
 
   if (Status s = WriteResults(pipeline, out_dir); !s.ok()) return Fail("run", s.ToString());
-  std::printf("input      %s (%s, %dx%d, %lld frames)\n", input.c_str(), info.codec_name.c_str(),
+  // The stream's own codec (a re-encoded one's vectors come from info.codec_name).
+  const std::string& codec = info.reencoded_from.empty() ? info.codec_name : info.reencoded_from;
+  std::printf("input      %s (%s, %dx%d, %lld frames)\n", input.c_str(), codec.c_str(),
               info.width_px, info.height_px, static_cast<long long>((*reader)->stats().frames));
   PrintStreamReport(info, (*reader)->stats());
   std::printf("tracked    %d of %d anchor pairs, %zu anchor poses, %zu planes in the map (%s)\n",

@@ -27,9 +27,10 @@ namespace slapse {
 // The encoder's settings, chosen for motion-vector quality on the tuning
 // drives (docs/METHOD.md "Re-encoding"; bench: docs/BENCHMARKS.md).
 struct ReencodeOptions {
-  // mpeg2video fixed quantiser, 1 (best) .. 31. 2: on tuning seed 1 (HEVC
-  // CRF 23 source) ATE 0.46 % of the distance against 1.82 % with 4, at
-  // 2.2x instead of 2.0x the CPU of decoding the source (docs/METHOD.md).
+  // mpeg2video fixed quantiser, 1 (best) .. 31. 2: on the tuning drives
+  // (HEVC CRF 23 sources) mean ATE 0.58 % of the distance against 0.83 %
+  // with 4, at 2.2x instead of 2.0x the CPU of decoding the source
+  // (docs/METHOD.md "Re-encoding").
   int quantiser = 2;
   // B frames between anchors: 3 gives IBBBP, the structure the merger was built for.
   int b_frames = 3;
