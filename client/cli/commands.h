@@ -21,6 +21,7 @@ int RunGet(int argc, char** argv);
 int RunStop(int argc, char** argv);
 int RunDelete(int argc, char** argv);
 int RunExport(int argc, char** argv);  // cmd_export.cc
+int RunEvalTrajectory(int argc, char** argv);  // cmd_eval_trajectory.cc
 
 // Prints "slapse <command>: <message>" on stderr and returns 1 (or 2 for usage errors).
 int Fail(const char* command, const std::string& message, int code = 1);

@@ -45,6 +45,8 @@ const Command kCommands[] = {
     {"delete", slapse::cli::RunDelete, "stop and forget a session"},
     {"export", slapse::cli::RunExport,
      "a session's trajectory / plane map from a server as TUM, KITTI or JSON files"},
+    {"eval-trajectory", slapse::cli::RunEvalTrajectory,
+     "the trajectory yardstick: every scene kind, tuning / reporting drives, per codec"},
 };
 
 void PrintUsage(FILE* out) {
