@@ -120,14 +120,16 @@ Status SimulateFlags::Apply(const CommandLine& cl) {
   opt.scene_kind = *kind;
   for (const Status& s :
        {CheckRange("supersampling", supersampling, int64_t{1}, int64_t{4}),
-        CheckRange("blur-px", opt.blur_px, 0, 5), CheckRange("sensor-noise", opt.sensor_noise, 0, 50),
+        CheckRange("blur-px", opt.blur_px, 0, 5),
+        CheckRange("sensor-noise", opt.sensor_noise, 0, 50),
         cl.Has("camera-height-m") ? CheckRange("camera-height-m", camera_height_m, 0.3, 10)
                                   : Status::Ok(),
         cl.Has("pitch-deg") ? CheckRange("pitch-deg", pitch_deg, -30, 30) : Status::Ok()}) {
     if (!s.ok()) return s;
   }
   opt.supersampling = static_cast<int>(supersampling);
-  if (cl.Has("camera-height-m")) opt.camera_height_min_m = opt.camera_height_max_m = camera_height_m;
+  if (cl.Has("camera-height-m"))
+    opt.camera_height_min_m = opt.camera_height_max_m = camera_height_m;
   if (cl.Has("pitch-deg")) opt.pitch_down_min_deg = opt.pitch_down_max_deg = -pitch_deg;
   if (cl.Has("min-speed-kmh")) opt.min_speed_mps = min_kmh / 3.6;
   if (cl.Has("max-speed-kmh")) opt.max_speed_mps = max_kmh / 3.6;

@@ -21,7 +21,8 @@ int RunGet(int argc, char** argv);
 int RunStop(int argc, char** argv);
 int RunDelete(int argc, char** argv);
 int RunExport(int argc, char** argv);  // cmd_export.cc
-int RunEvalTrajectory(int argc, char** argv);  // cmd_eval_trajectory.cc
+// The trajectory yardstick (cmd_eval_trajectory.cc).
+int RunEvalTrajectory(int argc, char** argv);
 
 // Prints "slapse <command>: <message>" on stderr and returns 1 (or 2 for usage errors).
 int Fail(const char* command, const std::string& message, int code = 1);
