@@ -34,6 +34,9 @@ struct SimulateFlags {
   double min_kmh = opt.min_speed_mps * 3.6, max_kmh = opt.max_speed_mps * 3.6;
   bool no_trees = false;
   std::string preset;
+  std::string scene_kind = SceneKindName(opt.scene_kind);
+  double camera_height_m = 0.0, pitch_deg = 0.0;  // 0 / unset: the path's default ranges
+  int64_t supersampling = opt.supersampling;
 
   void AddTo(CLI::App& app) {
     std::string names;
@@ -73,6 +76,28 @@ struct SimulateFlags {
         ->type_name("V")
         ->capture_default_str();
     app.add_flag("--no-trees", no_trees, "leave out the non-planar clutter");
+    app.add_option("--scene-kind", scene_kind,
+                   "urban, avenue, rural, highway, plaza or intersection (lab/sim/scene.h)")
+        ->type_name("KIND")
+        ->capture_default_str();
+    app.add_flag("--vary-look", opt.appearance_variety,
+                 "vary road appearance, markings, light and sky with the seed");
+    app.add_option("--camera-height-m", camera_height_m,
+                   "camera height above the road (default: drawn from 1.3-1.6 m)")
+        ->type_name("M");
+    app.add_option("--pitch-deg", pitch_deg,
+                   "fixed camera pitch, up positive (default: drawn from -5..-2 deg)")
+        ->type_name("DEG");
+    app.add_option("--supersampling", supersampling, "anti-aliasing samples per pixel and axis")
+        ->type_name("N")
+        ->capture_default_str();
+    app.add_option("--blur-px", opt.blur_px, "Gaussian blur of each frame (sigma, pixels)")
+        ->type_name("PX")
+        ->capture_default_str();
+    app.add_option("--sensor-noise", opt.sensor_noise,
+                   "Gaussian sensor noise (sigma, 8-bit levels)")
+        ->type_name("SIGMA")
+        ->capture_default_str();
     app.add_option("--video-name", opt.video_name,
                    "video file name; its extension picks the container")
         ->type_name("FILE")
@@ -97,6 +122,22 @@ Status SimulateFlags::Apply(const CommandLine& cl) {
         CheckRange("max-speed-kmh", max_kmh, 1, 200)}) {
     if (!s.ok()) return s;
   }
+  auto kind = ParseSceneKind(scene_kind);
+  if (!kind.ok()) return kind.status();
+  opt.scene_kind = *kind;
+  for (const Status& s :
+       {CheckRange("supersampling", supersampling, int64_t{1}, int64_t{4}),
+        CheckRange("blur-px", opt.blur_px, 0, 5),
+        CheckRange("sensor-noise", opt.sensor_noise, 0, 50),
+        cl.Has("camera-height-m") ? CheckRange("camera-height-m", camera_height_m, 0.3, 10)
+                                  : Status::Ok(),
+        cl.Has("pitch-deg") ? CheckRange("pitch-deg", pitch_deg, -30, 30) : Status::Ok()}) {
+    if (!s.ok()) return s;
+  }
+  opt.supersampling = static_cast<int>(supersampling);
+  if (cl.Has("camera-height-m"))
+    opt.camera_height_min_m = opt.camera_height_max_m = camera_height_m;
+  if (cl.Has("pitch-deg")) opt.pitch_down_min_deg = opt.pitch_down_max_deg = -pitch_deg;
   if (cl.Has("min-speed-kmh")) opt.min_speed_mps = min_kmh / 3.6;
   if (cl.Has("max-speed-kmh")) opt.max_speed_mps = max_kmh / 3.6;
   if (opt.min_speed_mps > opt.max_speed_mps) {

@@ -22,6 +22,8 @@ int RunStop(int argc, char** argv);
 int RunDelete(int argc, char** argv);
 int RunExport(int argc, char** argv);  // cmd_export.cc
 int RunHealth(int argc, char** argv);  // cmd_health.cc
+// The trajectory yardstick (cmd_eval_trajectory.cc).
+int RunEvalTrajectory(int argc, char** argv);
 
 // Prints "slapse <command>: <message>" on stderr and returns 1 (or 2 for usage errors).
 int Fail(const char* command, const std::string& message, int code = 1);

@@ -47,6 +47,8 @@ const Command kCommands[] = {
      "a session's trajectory / plane map from a server as TUM, KITTI or JSON files"},
     {"health", slapse::cli::RunHealth,
      "ask a server's gRPC health service whether a service is SERVING (exit 0)"},
+    {"eval-trajectory", slapse::cli::RunEvalTrajectory,
+     "the trajectory yardstick: every scene kind, tuning / reporting drives, per codec"},
 };
 
 void PrintUsage(FILE* out) {

@@ -30,7 +30,7 @@ struct Resolution {
   double hfov_min_deg, hfov_max_deg;
 };
 constexpr Resolution kResolutions[3] = {
-    {640, 480, 60, 75}, {1280, 720, 70, 90}, {1242, 375, 78, 88}};
+    {640, 480, 60, 75}, {1280, 720, 70, 90}, {1242, 376, 78, 88}};
 
 }  // namespace
 
@@ -57,8 +57,8 @@ DriveSpec MakeDriveSpec(SceneKind kind, int seed) {
   o.pitch_down_min_deg = o.pitch_down_max_deg = -rng.Uniform(-10.0, 5.0);
   o.min_speed_mps = kSpeeds[k].min_kmh / 3.6;
   o.max_speed_mps = kSpeeds[k].max_kmh / 3.6;
-  // 6 s (5 s at 60 fps): 60-300 frames.
-  o.duration_s = o.fps >= 60 ? 5.0 : 6.0;
+  // 5 s (4 s at 60 fps): 50-240 frames.
+  o.duration_s = o.fps >= 60 ? 4.0 : 5.0;
   // Anti-aliasing: 1-3 samples per pixel and axis (at most 2 above 640x480).
   o.supersampling = std::min(1 + (seed + 2 * k) % 3, r.width > 640 ? 2 : 3);
   o.blur_px = rng.Bernoulli(0.5) ? rng.Uniform(0.3, 0.8) : 0.0;

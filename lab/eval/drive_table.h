@@ -32,7 +32,8 @@ struct DriveSpec {
 
 // The drive (kind, seed), seed >= 1: simulator seed 1000 * (kind + 1) + seed
 // (apart from Table II's seeds 1-10); fps {10, 25, 30, 60}, resolution
-// {640x480, 1280x720, 1242x375} cycled so that each kind's tuning and
+// {640x480, 1280x720, 1242x376 (KITTI's 1242x375 plus one row: 4:2:0 needs an
+// even height)} cycled so that each kind's tuning and
 // reporting seeds both cover them; camera height 1.2-2.5 m, pitch -10..+5 deg
 // (up positive), the kind's speed range, supersampling 1-3, blur and sensor
 // noise, appearance varied with the seed.

@@ -1,0 +1,107 @@
+// Today's pipeline on every scene kind of the widened simulator, end to end:
+// a short low-resolution drive per kind (320x240, 30 fps, MPEG-2 IBBBP, real
+// encoder and MV reader) through the yardstick's own per-drive evaluation
+// (lab/eval/drive_eval.h: up to scale and once per metric scale source).
+//
+// Bounds: what the pipeline achieves today with margin (docs/TRAJECTORY.md
+// "Scene-kind end-to-end tests"), tight enough that a broken pipeline fails:
+// no poses, poses only late, or a trajectory that does not follow the truth.
+// Kinds where today's pipeline does not track are asserted as such only in
+// what is certain (the run completes, no pose is invented before the first
+// tracked pair) and listed as known misses in docs/TRAJECTORY.md.
+#include <cstdio>
+#include <filesystem>
+
+#include <gtest/gtest.h>
+
+#include "lab/eval/drive_eval.h"
+#include "tests/test_streams.h"
+
+namespace slapse {
+namespace {
+
+DriveResult RunSmallDrive(SceneKind kind, int seed) {
+  DriveSpec spec = MakeDriveSpec(kind, seed);
+  spec.name = "e2e-" + spec.name;
+  SimulateOptions& o = spec.sim;
+  o.duration_s = 3.0;
+  o.fps = 30.0;
+  o.width_px = 320;
+  o.height_px = 240;
+  o.hfov_deg = 70.0;
+  o.supersampling = 1;
+  o.blur_px = 0.0;
+  DriveEvalOptions eo;
+  eo.out_dir = testing::MakeTempDir("scene_kinds_e2e");
+  eo.reuse = false;
+  auto r = EvaluateDrive(spec, eo);
+  std::filesystem::remove_all(eo.out_dir);
+  EXPECT_TRUE(r.ok()) << r.status().ToString();
+  if (!r.ok()) return DriveResult{};
+  std::printf(
+      "%s: %d/%d frames posed, first pose %.2f s, %d/%d pairs, D %.1f m, ATE %.3f m (%.2f %%), "
+      "eps_D %.2f %%, scale err height %s%.3f speed %s%.3f first %s%.3f, note '%s'\n",
+      spec.name.c_str(), r->posed_frames, r->frames, r->first_pose_s, r->tracked_pairs,
+      r->anchor_pairs, r->distance_m, r->ate_m,
+      r->distance_m > 0 ? 100 * r->ate_m / r->distance_m : 0.0, 100 * r->eps_D,
+      r->metric[0] ? "" : "(not metric) ", r->scale_error[0], r->metric[1] ? "" : "(not metric) ",
+      r->scale_error[1], r->metric[2] ? "" : "(not metric) ", r->scale_error[2], r->note.c_str());
+  return *r;
+}
+
+// A kind where today's pipeline tracks: poses from the first second on, for
+// most anchors, following the truth.
+void ExpectTracks(const DriveResult& r, double max_ate_frac, double max_eps_D) {
+  ASSERT_TRUE(r.evaluated) << r.spec.name << ": fewer than 3 poses";
+  EXPECT_GE(r.first_pose_frame, 0);
+  EXPECT_LE(r.first_pose_s, 1.0);
+  EXPECT_GE(r.tracked_pairs, r.anchor_pairs - 3);
+  EXPECT_GT(r.distance_m, 5.0);
+  EXPECT_LT(r.ate_m, max_ate_frac * r.distance_m);
+  EXPECT_LT(r.eps_D, max_eps_D);
+  // The first-step and speed sources are metric from the start; their scale
+  // is the truth's within the drift the up-to-scale run has.
+  EXPECT_TRUE(r.metric[kScaleFirstStep]);
+  EXPECT_TRUE(r.metric[kScaleSpeed]);
+  EXPECT_LT(std::abs(r.scale_error[kScaleFirstStep]), 0.5);
+}
+
+// A kind where today's pipeline does not initialise at this size (rural road
+// and highway at 320x240: no plane extracted / no reliable motion; known
+// misses in docs/TRAJECTORY.md). Nothing fake: the run completes, every pair
+// that did not track says why, and poses, if any appear, follow the truth.
+void ExpectTracksOrSaysWhy(const DriveResult& r) {
+  EXPECT_GT(r.anchor_pairs, 15);
+  if (r.tracked_pairs < r.anchor_pairs) EXPECT_FALSE(r.note.empty());
+  if (r.posed_frames == 0) {
+    EXPECT_EQ(r.first_pose_frame, -1);
+    EXPECT_EQ(r.tracked_pairs, 0);
+    return;
+  }
+  if (!r.evaluated) return;
+  EXPECT_LT(r.ate_m, 0.05 * r.distance_m);
+  EXPECT_LT(r.eps_D, 0.10);
+}
+
+// Today (docs/TRAJECTORY.md): urban ATE 1.1 %, eps_D 5.6 %; avenue 0.4 %, 3.1 %.
+TEST(SceneKindsEndToEndTest, Urban) {
+  ExpectTracks(RunSmallDrive(SceneKind::kUrban, 2), 0.05, 0.12);
+}
+TEST(SceneKindsEndToEndTest, Avenue) {
+  ExpectTracks(RunSmallDrive(SceneKind::kAvenue, 2), 0.05, 0.12);
+}
+TEST(SceneKindsEndToEndTest, RuralKnownMiss) {
+  ExpectTracksOrSaysWhy(RunSmallDrive(SceneKind::kRural, 2));
+}
+TEST(SceneKindsEndToEndTest, HighwayKnownMiss) {
+  ExpectTracksOrSaysWhy(RunSmallDrive(SceneKind::kHighway, 2));
+}
+TEST(SceneKindsEndToEndTest, Plaza) {
+  ExpectTracks(RunSmallDrive(SceneKind::kPlaza, 2), 0.05, 0.12);
+}
+TEST(SceneKindsEndToEndTest, Intersection) {
+  ExpectTracks(RunSmallDrive(SceneKind::kIntersection, 2), 0.05, 0.12);
+}
+
+}  // namespace
+}  // namespace slapse
