@@ -120,6 +120,23 @@ async function main() {
     const shown = await page.evaluate(() => window.slapseMetrics.points);
     check(served === shown, `page shows ${shown} poses, server has ${served}`);
     out.final_points = shown;
+
+    // Delete the finished upload from its page: Cancel keeps it, Yes deletes it
+    // and returns to the fleet, which then has only the stopped session.
+    await page.goto(`${args.url}/session.html?name=${encodeURIComponent(args.upload)}`);
+    await page.waitForFunction(() => document.getElementById('state').textContent === 'FINISHED');
+    check(await page.isDisabled('#stop'), 'a finished session cannot be stopped');
+    await page.click('#delete');
+    await page.click('#confirm button[value="cancel"]');
+    const kept = await page.evaluate(async (name) =>
+      (await fetch(`/api/session?${new URLSearchParams({ name })}`)).status, args.upload);
+    check(kept === 200, `Cancel keeps the session (HTTP ${kept})`);
+    await page.click('#delete');
+    await page.click('#confirm-ok');
+    await page.waitForURL((u) => u.pathname === '/');
+    await page.waitForFunction(() => document.querySelectorAll('#fleet tbody tr').length === 1);
+    const left = await fleetStates(page);
+    check(left[args.live] === 'STOPPED' && !(args.upload in left), `fleet after delete: ${JSON.stringify(left)}`);
     check(errors.length === 0, `no page errors: ${errors.join('; ')}`);
   } finally {
     await browser.close();
