@@ -596,10 +596,8 @@ bool SessionOrder::Less(const v1::Session& a, const v1::Session& b) const {
     const int c = CompareBy(key->ref, a, b);
     if (c != 0) return key->desc ? c > 0 : c < 0;
   }
-  // Ties: creation order, then name (unique).
-  const int c = CompareBy({Field::kCreateTime, "", nullptr}, a, b);
-  if (c != 0) return c < 0;
-  return a.name() < b.name();
+  // Ties keep the order the caller passed (ApplyListQuery sorts stably).
+  return false;
 }
 
 // ---- the page ----
@@ -661,8 +659,8 @@ StatusOr<v1::ListSessionsResponse> ApplyListQuery(std::vector<v1::Session> sessi
     }
     if (filter->Matches(s)) kept.push_back(std::move(s));
   }
-  std::sort(kept.begin(), kept.end(),
-            [&](const v1::Session& a, const v1::Session& b) { return order->Less(a, b); });
+  std::stable_sort(kept.begin(), kept.end(),
+                   [&](const v1::Session& a, const v1::Session& b) { return order->Less(a, b); });
   const size_t page_size = request.page_size() == 0
                                ? kDefaultListPageSize
                                : std::min(request.page_size(), kMaxListPageSize);

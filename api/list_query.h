@@ -30,7 +30,7 @@
 //
 // order_by: "field [asc|desc]" separated by commas, fields name, state,
 // source, codec, create_time, update_time, stats.<counter>, labels.<key>;
-// ties are broken by create_time then name. Empty = "create_time, name".
+// ties keep the server's creation order. Empty = creation order.
 //
 // Pages are positions in the filtered, ordered result; next_page_token is
 // opaque and only valid with the same filter and order_by. A session created,
@@ -72,7 +72,7 @@ class SessionFilter {
 
 class SessionOrder {
  public:
-  // The default order: create_time, then name.
+  // The default order: none (the caller's order, which is creation order).
   SessionOrder();
   static StatusOr<SessionOrder> Parse(const std::string& order_by);
   // Strict weak order: true if `a` comes before `b`.
@@ -84,9 +84,10 @@ class SessionOrder {
   std::vector<std::shared_ptr<const Key>> keys_;
 };
 
-// Filters `sessions` (every session the caller may see, in any order) by
-// request.filter and request.state_filter, orders them by request.order_by
-// and returns the page that request.page_token / page_size ask for.
+// Filters `sessions` (every session the caller may see, in creation order)
+// by request.filter and request.state_filter, orders them stably by
+// request.order_by and returns the page that request.page_token / page_size
+// ask for.
 // INVALID_ARGUMENT for a bad filter, order_by, page size or token.
 StatusOr<v1::ListSessionsResponse> ApplyListQuery(std::vector<v1::Session> sessions,
                                                   const v1::ListSessionsRequest& request);

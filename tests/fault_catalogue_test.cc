@@ -302,7 +302,8 @@ void AddRequestItems(const v1::Session& ok, SlapseClient* c, std::vector<Item>* 
                     list(0, "", 42)});
   items->push_back(
       {"ListSessions page_size = -1", I, bad, "page_size must be >= 0", list(-1, "", 0)});
-  items->push_back({"ListSessions page_token 'x'", I, bad, "bad page_token", list(0, "x", 0)});
+  items->push_back({"ListSessions page_token 'x'", I, bad,
+                    "page_token is not one this server issued", list(0, "x", 0)});
 }
 
 // Names that are malformed or unknown, on every rpc that takes one.

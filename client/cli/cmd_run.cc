@@ -260,7 +260,7 @@ int RunRun(int argc, char** argv) {
   std::vector<PlaneEstimate> plane_estimates;
   const bool progress = !quiet && isatty(STDERR_FILENO);
   int steps = 0, tracked = 0;
-  std::string last_note;  // why the last untracked step did not track
+  std::string last_note;   // why the last untracked step did not track
   std::string scale_note;  // the last step's, when it said something
   FrameRecord frame;
   Status end;

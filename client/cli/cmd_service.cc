@@ -84,7 +84,8 @@ void PrintSessionLine(const v1::Session& s) {
   if (!s.labels().empty() || !s.stream_report().codec().empty()) {
     // Labels in key order, so the line is stable.
     std::map<std::string, std::string> sorted(s.labels().begin(), s.labels().end());
-    std::string line = s.stream_report().codec().empty() ? "" : "codec " + s.stream_report().codec();
+    std::string line =
+        s.stream_report().codec().empty() ? "" : "codec " + s.stream_report().codec();
     for (const auto& [k, v] : sorted) line += (line.empty() ? "" : "  ") + k + "=" + v;
     std::printf("%-14s %s\n", "", line.c_str());
   }
@@ -235,14 +236,13 @@ int RunServe(int argc, char** argv) {
 
   auto server = server::SlapseServer::Start(o);
   if (!server.ok()) return Fail("serve", server.status().message());
-  std::printf("slapse serving on %s:%d (max %d sessions; data in %s; %s; %s; health%s on)\n",
-              o.address.c_str(), (*server)->port(), o.sessions.max_sessions,
-              o.sessions.data_dir.c_str(),
-              o.auth.tls() ? (o.auth.tls_client_ca_file.empty() ? "TLS"
-                                                                : "TLS with client certificates")
-                           : "plain text",
-              o.auth.tokens() ? "bearer tokens required" : "no tokens",
-              o.reflection ? " + reflection" : "");
+  std::printf(
+      "slapse serving on %s:%d (max %d sessions; data in %s; %s; %s; health%s on)\n",
+      o.address.c_str(), (*server)->port(), o.sessions.max_sessions, o.sessions.data_dir.c_str(),
+      o.auth.tls() ? (o.auth.tls_client_ca_file.empty() ? "TLS" : "TLS with client certificates")
+                   : "plain text",
+      o.auth.tokens() ? "bearer tokens required" : "no tokens",
+      o.reflection ? " + reflection" : "");
   if ((*server)->http_port() != 0) {
     std::printf("slapse metrics on http://%s:%d/metrics\n", o.address.c_str(),
                 (*server)->http_port());
@@ -256,7 +256,8 @@ int RunServe(int argc, char** argv) {
   int sig = 0;
   while (sigwait(&signals, &sig) == 0 && sig == SIGHUP) {
     const Status reloaded = (*server)->ReloadTokens();
-    if (reloaded.ok()) server::Log(server::LogLevel::kInfo, "", "tokens", "SIGHUP: tokens reloaded");
+    if (reloaded.ok())
+      server::Log(server::LogLevel::kInfo, "", "tokens", "SIGHUP: tokens reloaded");
   }
   server::Log(server::LogLevel::kInfo, "", "shutdown",
               std::string(sig == SIGINT ? "SIGINT" : "SIGTERM") + ", shutting down");
