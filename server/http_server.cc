@@ -2,6 +2,9 @@
 
 #include <httplib.h>
 
+#include <chrono>
+#include <thread>
+
 namespace slapse::server {
 namespace {
 
@@ -104,6 +107,13 @@ Status HttpServer::Start(const std::string& address, int port) {
 
 void HttpServer::Stop() {
   if (!thread_.joinable()) return;
+  // httplib's stop() only stops a server already in its accept loop: one
+  // stopped right after Start() (before the thread got there) would listen
+  // for ever. Wait until it runs (bounded: a listen that failed never runs),
+  // then stop it.
+  for (int waited_ms = 0; !server_->is_running() && waited_ms < 5000; ++waited_ms) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
   server_->stop();
   thread_.join();
 }
