@@ -31,8 +31,22 @@ cv::Mat TopDownPlot::Render(int width_px, int height_px, const std::string& titl
     lo = lo.cwiseMin(p);
     hi = hi.cwiseMax(p);
   };
+  // The extent: the paths (the drive) and what lies near them (the planes
+  // seen, the facades along the road), not everything added (a simulated
+  // city's facades would leave the drive a few pixels wide). Without paths,
+  // everything.
   for (const Path& p : paths_) std::for_each(p.points.begin(), p.points.end(), grow);
-  for (const Segment& s : segments_) grow(s.a), grow(s.b);
+  const bool have_paths = lo.x() <= hi.x();
+  const double reach = have_paths ? kNearPathFraction * std::max((hi - lo).maxCoeff(), 1e-6) : 0;
+  const Eigen::Vector2d near_lo = lo.array() - reach, near_hi = hi.array() + reach;
+  auto grow_near = [&](const Eigen::Vector2d& p) {
+    if (!have_paths ||
+        ((p.array() >= near_lo.array()).all() && (p.array() <= near_hi.array()).all())) {
+      grow(p);
+    }
+  };
+  for (const Dots& d : dots_) std::for_each(d.points.begin(), d.points.end(), grow_near);
+  for (const Segment& s : segments_) grow_near(s.a), grow_near(s.b);
   if (lo.x() > hi.x()) lo.setZero(), hi.setOnes();
   const double margin = 0.08 * std::max((hi - lo).maxCoeff(), 1e-6);
   lo.array() -= margin;
@@ -80,6 +94,16 @@ cv::Mat TopDownPlot::Render(int width_px, int height_px, const std::string& titl
       legend_y += 18;
     }
   }
+  // Scale bar, bottom left: one grid step.
+  const int bar_px = static_cast<int>(std::lround(step * scale));
+  const cv::Point bar_from(12, height_px - 14), bar_to(12 + bar_px, height_px - 14);
+  cv::line(out, bar_from, bar_to, cv::Scalar(0, 0, 0), 2);
+  cv::line(out, bar_from - cv::Point(0, 5), bar_from + cv::Point(0, 5), cv::Scalar(0, 0, 0), 2);
+  cv::line(out, bar_to - cv::Point(0, 5), bar_to + cv::Point(0, 5), cv::Scalar(0, 0, 0), 2);
+  char bar_label[64];
+  std::snprintf(bar_label, sizeof(bar_label), "%g %s", step, unit.c_str());
+  cv::putText(out, bar_label, bar_to + cv::Point(8, 5), cv::FONT_HERSHEY_SIMPLEX, 0.45,
+              cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
   char caption[200];
   std::snprintf(caption, sizeof(caption), "%s   (grid %g %s)", title.c_str(), step, unit.c_str());
   cv::putText(out, caption, {10, 20}, cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 0, 0), 1,

@@ -18,9 +18,12 @@ class TopDownPlot {
   void AddPoints(std::vector<Eigen::Vector2d> points, cv::Scalar colour, int radius_px = 2);
   void AddSegment(const Eigen::Vector2d& a, const Eigen::Vector2d& b, cv::Scalar colour,
                   int thickness_px = 2);
-  // Renders at the given size; `unit` names the length unit for the grid caption.
+  // Renders at the given size, fitted to the paths and what lies within
+  // kNearPathFraction of their extent (everything when there is no path),
+  // with a grid and a scale bar; `unit` names the length unit.
   cv::Mat Render(int width_px, int height_px, const std::string& title,
                  const std::string& unit) const;
+  static constexpr double kNearPathFraction = 0.25;
 
  private:
   struct Path {
