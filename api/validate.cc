@@ -178,13 +178,16 @@ std::string RedactUrlOnce(const std::string& url) {
 std::string RedactUrl(const std::string& url) {
   // To a fixed point: masking a parameter can remove a "://" whose userinfo
   // the pass had masked, so a later pass might see the text differently.
+  // A text that needs more passes than kMaxRedactPasses (found by
+  // fuzz_sdp_url: nested "://" and '@' that each pass uncovers one by one) is
+  // masked whole, which is idempotent too.
   std::string out = RedactUrlOnce(url);
-  for (int pass = 0; pass < 8; ++pass) {
+  for (int pass = 0; pass < kMaxRedactPasses; ++pass) {
     std::string next = RedactUrlOnce(out);
-    if (next == out) break;
+    if (next == out) return out;
     out = std::move(next);
   }
-  return out;
+  return kRedactedUrl;
 }
 
 std::string RedactText(const std::string& text) {
@@ -442,20 +445,19 @@ Status ValidateLabels(const google::protobuf::Map<std::string, std::string>& lab
                                 " labels; at most " + std::to_string(kMaxLabels));
   }
   for (const auto& [key, value] : labels) {
-    const bool key_ok =
-        !key.empty() && key.size() <= kMaxLabelKeyChars && key[0] >= 'a' && key[0] <= 'z' &&
-        std::all_of(key.begin(), key.end(), [](char c) {
-          return (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '_' || c == '.' ||
-                 c == '-';
-        });
+    const bool key_ok = !key.empty() && key.size() <= kMaxLabelKeyChars && key[0] >= 'a' &&
+                        key[0] <= 'z' && std::all_of(key.begin(), key.end(), [](char c) {
+                          return (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '_' ||
+                                 c == '.' || c == '-';
+                        });
     if (!key_ok) {
       return InvalidArgumentError("session.labels: key '" + key.substr(0, kMaxLabelKeyChars) +
                                   "' must be 1-" + std::to_string(kMaxLabelKeyChars) +
                                   " of [a-z0-9_.-] starting with a letter");
     }
-    if (value.size() > kMaxLabelValueChars ||
-        std::any_of(value.begin(), value.end(),
-                    [](char c) { return static_cast<unsigned char>(c) < 0x20; })) {
+    if (value.size() > kMaxLabelValueChars || std::any_of(value.begin(), value.end(), [](char c) {
+          return static_cast<unsigned char>(c) < 0x20;
+        })) {
       return InvalidArgumentError("session.labels['" + key + "']: the value must be at most " +
                                   std::to_string(kMaxLabelValueChars) +
                                   " characters with no control characters");
@@ -506,8 +508,8 @@ Status ValidatePipelineOptions(const v1::PipelineOptions& p) {
 
 Status ValidateListRequest(const v1::ListSessionsRequest& r) {
   if (r.page_size() < 0) {
-    return InvalidArgumentError("page_size must be >= 0 (0 = " +
-                                std::to_string(kDefaultListPageSize) + ")");
+    return InvalidArgumentError(
+        "page_size must be >= 0 (0 = " + std::to_string(kDefaultListPageSize) + ")");
   }
   if (!v1::Session::State_IsValid(r.state_filter())) {
     return InvalidArgumentError("state_filter " + std::to_string(r.state_filter()) +

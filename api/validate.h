@@ -77,6 +77,10 @@ Status ValidateIntrinsicsForImage(const v1::Intrinsics& k, int width_px, int hei
 // of every token-like query or fragment parameter (IsSecretParamName)
 // replaced by ***:  rtsp://u:pw@cam/1?token=abc&ch=2 -> rtsp://***@cam/1?token=***&ch=2.
 // Idempotent; a URL without '@' and without a secret parameter is unchanged.
+// RedactUrl passes to a fixed point at most this many times; a text that
+// needs more comes back as kRedactedUrl.
+constexpr int kMaxRedactPasses = 64;
+constexpr char kRedactedUrl[] = "<url redacted>";
 std::string RedactUrl(const std::string& url);
 // Whether a query parameter named `name` (any case) holds a secret: token,
 // access_token, key, api_key, apikey, password, passwd, pwd, pass, secret,

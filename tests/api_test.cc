@@ -5,6 +5,10 @@
 // wrong in the server's words.
 #include <gtest/gtest.h>
 
+#include <iterator>
+
+#include <fstream>
+
 #include <cmath>
 #include <limits>
 
@@ -340,6 +344,28 @@ TEST(ValidateTest, IntrinsicsAgainstTheImage) {
   s.mutable_intrinsics()->set_width_px(640);
   s.mutable_intrinsics()->set_height_px(480);
   EXPECT_EQ(api::ValidateSession(s).code(), StatusCode::kInvalidArgument);
+}
+
+// fuzz_sdp_url's finding (fuzz/corpus/sdp_url/regress_redact_not_idempotent):
+// a URL whose nested "://" and '@' took more fixed-point passes than RedactUrl
+// allowed came back changed by a second RedactUrl. The URL is built from the
+// input as the harness builds it: <prefix>://<user>:S3CR3T@<host>.
+TEST(ValidateTest, RedactUrlIsIdempotentOnTheFuzzersFinding) {
+  std::ifstream in(std::string(SLAPSE_FUZZ_CORPUS_DIR) + "/sdp_url/regress_redact_not_idempotent",
+                   std::ios::binary);
+  ASSERT_TRUE(in.good());
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_GT(bytes.size(), 1u);
+  const std::string text = bytes.substr(1);
+  const size_t nl = text.find('\n');
+  const std::string prefix = nl == std::string::npos ? "rtsp" : text.substr(0, nl);
+  const std::string rest = nl == std::string::npos ? text : text.substr(nl + 1);
+  const size_t nl2 = rest.find('\n');
+  const std::string user = nl2 == std::string::npos ? "user" : rest.substr(0, nl2);
+  const std::string host = nl2 == std::string::npos ? rest : rest.substr(nl2 + 1);
+  const std::string url = prefix + "://" + user + ":S3CR3T@" + host;
+  const std::string once = api::RedactUrl(url);
+  EXPECT_EQ(api::RedactUrl(once), once);
 }
 
 TEST(ValidateTest, RtspUrlAndRedaction) {
