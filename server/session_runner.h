@@ -81,7 +81,7 @@ class SessionRunner {
   int64_t last_index_ = -1;        // of the last frame processed (offset)
   double last_timestamp_s_ = 0.0;  // of the last frame processed (offset)
   Clock::time_point last_frame_wall_;
-  int64_t segment_points_ = 0;  // trajectory points of this run's pipeline
+  int64_t segment_points_ = 0;     // trajectory points of this run's pipeline
   int64_t last_point_index_ = -1;  // frame index of the last trajectory point stored
 };
 

@@ -19,10 +19,10 @@
 
 #include <gtest/gtest.h>
 
-#include "lab/eval/plane_map_eval.h"
-#include "lab/eval/trajectory_eval.h"
 #include "core/mv/mv_reader.h"
 #include "core/pipeline/pipeline.h"
+#include "lab/eval/plane_map_eval.h"
+#include "lab/eval/trajectory_eval.h"
 #include "lab/gt/ground_truth.h"
 #include "tests/test_streams.h"
 

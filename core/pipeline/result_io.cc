@@ -7,8 +7,7 @@
 
 namespace slapse {
 
-void WriteTrajectoryTum(const std::vector<TimedPose>& trajectory,
-                        std::ostream& out) {
+void WriteTrajectoryTum(const std::vector<TimedPose>& trajectory, std::ostream& out) {
   out << "# timestamp_s tx ty tz qx qy qz qw  (world_from_cam; world = first tracked camera, "
          "x right, y down, z forward)\n";
   char line[400];
@@ -21,8 +20,7 @@ void WriteTrajectoryTum(const std::vector<TimedPose>& trajectory,
   }
 }
 
-void WriteTrajectoryKitti(const std::vector<TimedPose>& trajectory,
-                          std::ostream& out) {
+void WriteTrajectoryKitti(const std::vector<TimedPose>& trajectory, std::ostream& out) {
   char line[400];
   for (const auto& p : trajectory) {
     const Eigen::Vector3d& t = p.world_from_cam.translation;

@@ -15,12 +15,10 @@
 namespace slapse {
 
 // TUM: a header comment, then "timestamp_s tx ty tz qx qy qz qw" per pose.
-void WriteTrajectoryTum(const std::vector<TimedPose>& trajectory,
-                        std::ostream& out);
+void WriteTrajectoryTum(const std::vector<TimedPose>& trajectory, std::ostream& out);
 
 // KITTI: the 3x4 matrix [R | t] of each pose, row-major, one pose per line.
-void WriteTrajectoryKitti(const std::vector<TimedPose>& trajectory,
-                          std::ostream& out);
+void WriteTrajectoryKitti(const std::vector<TimedPose>& trajectory, std::ostream& out);
 
 // The timed poses of an all-frames trajectory (Pipeline::poses()), for the
 // TUM and KITTI writers.

@@ -94,7 +94,7 @@ class UpdateStream {
   // poses that may have been revised since the last update begin.
   std::vector<int> pose_revisions_sent_;
   size_t revisable_from_ = 0;
-  bool metric_ = false;        // the scale of what was sent
+  bool metric_ = false;  // the scale of what was sent
 };
 
 }  // namespace slapse
