@@ -457,7 +457,9 @@ class ServeProcess : public testing::ChildProcess {
  public:
   ServeProcess(const std::string& dir, std::vector<std::string> args)
       : out_(dir + "/serve.out"), err_(dir + "/serve.err") {
-    args.insert(args.begin(), {SLAPSE_CLI, "serve", "--port", "0"});
+    // --http-port 0: no HTTP listener, so the fixed default 8080 cannot collide
+    // with another test's server running at the same time.
+    args.insert(args.begin(), {SLAPSE_CLI, "serve", "--port", "0", "--http-port", "0"});
     std::vector<char*> c;
     for (std::string& a : args) c.push_back(a.data());
     c.push_back(nullptr);

@@ -59,7 +59,8 @@ class ServeProcess : public ChildProcess {
   ServeProcess(int port, const std::string& data_dir, const std::string& log) {
     std::vector<std::string> argv = {
         SLAPSE_CLI,           "serve",      "--address", "127.0.0.1",      "--port",
-        std::to_string(port), "--data-dir", data_dir,    "--max-sessions", "4"};
+        std::to_string(port), "--data-dir", data_dir,    "--max-sessions", "4",
+        "--http-port",        "0"};  // no HTTP: 8080 may be another test's
     std::vector<char*> c;
     for (std::string& a : argv) c.push_back(a.data());
     c.push_back(nullptr);
