@@ -34,14 +34,16 @@ constexpr int kNumScaleSources = 3;
 struct DriveResult {
   DriveSpec spec;
   int frames = 0;
-  int posed_frames = 0;           // frames with a pose (up to scale run)
+  int posed_frames = 0;           // frames with a pose, anchors and between (up to scale run)
   int64_t first_pose_frame = -1;  // -1: never
   double first_pose_s = -1.0;
   int anchor_pairs = 0, tracked_pairs = 0;
   double drive_distance_m = 0.0;  // the true path, whole drive
   bool evaluated = false;         // >= 3 poses: the errors below are valid
   double distance_m = 0.0;        // the true path over the posed frames
-  double ate_m = 0.0, eps_D = 0.0, rpe_m = 0.0, rpe_deg = 0.0;
+  // ATE over every posed frame; ATE over the anchors only; eps_D (paper: the
+  // anchors, first-step scale) and RPE per anchor step.
+  double ate_m = 0.0, anchor_ate_m = 0.0, eps_D = 0.0, rpe_m = 0.0, rpe_deg = 0.0;
   int planes_evaluated = 0;
   double eps_d_m = -1.0, eps_n_deg = -1.0;  // -1: no plane evaluated
   bool metric[kNumScaleSources] = {false, false, false};
