@@ -116,7 +116,7 @@ void SessionManager::Restore(StoredSession stored) {
                         ", in a new world frame)");
     }
   }
-  pool_.Submit([s] { SessionRunner(s).Run(); });
+  pool_.Submit([s, keep = options_.final_poses_in_memory] { SessionRunner(s, keep).Run(); });
 }
 
 void SessionManager::RetentionLoop() {
@@ -189,7 +189,7 @@ StatusOr<v1::Session> SessionManager::Create(const v1::Session& request) {
     sessions_[*ordinal] = s;
     ordinals_[s->name] = *ordinal;
     // Queued under mu_, so a Shutdown after this still runs (and ends) it.
-    pool_.Submit([s] { SessionRunner(s).Run(); });
+    pool_.Submit([s, keep = options_.final_poses_in_memory] { SessionRunner(s, keep).Run(); });
   }
   return s->Snapshot();
 }

@@ -61,6 +61,11 @@ struct SessionManagerOptions {
   // A finished session's results are deleted this long after it ended (it
   // becomes EXPIRED, with a StateChange saying so); 0 = kept until deleted.
   int64_t retention_ttl_s = 0;
+  // A session's pipeline keeps this many final poses in memory after each
+  // step and forgets the older ones, with the anchors and the planes no
+  // longer held (Pipeline::ForgetFinal): the store has them, and a session's
+  // memory does not grow with its length.
+  size_t final_poses_in_memory = 256;
 };
 
 // NOT_FOUND for session `name`: "no session '<name>' on this server" (also

@@ -45,7 +45,8 @@ v1::PlaneEvent::Kind KindToProto(PlaneChange::Kind kind) {
 
 }  // namespace
 
-SessionRunner::SessionRunner(std::shared_ptr<Session> session) : session_(std::move(session)) {
+SessionRunner::SessionRunner(std::shared_ptr<Session> session, size_t final_poses_in_memory)
+    : session_(std::move(session)), final_poses_in_memory_(final_poses_in_memory) {
   source_ = IngestSource::Make(session_->Snapshot(), session_->upload);
   std::lock_guard<std::mutex> lock(session_->mu);
   if (session_->resumed_last_index < 0) return;
@@ -260,13 +261,18 @@ void SessionRunner::Publish(const FrameRecord& frame, const PipelineStep* step) 
       tracked_ += step->tracking;
       st->set_anchor_pairs(pairs_);
       st->set_tracked_pairs(tracked_);
-      st->set_planes(static_cast<int>(pipeline_->plane_map().size()));
+      st->set_planes(
+          static_cast<int>(pipeline_->planes_forgotten() + pipeline_->plane_map().size()));
       *session_->proto.mutable_update_time() = TimeUtil::GetCurrentTime();
       ApplyUpdatesLocked(*updates, &events, &store_step);
       row = session_->proto;
       store_step.metric = session_->metric;
     }
   }
+  // The step's updates are in `events` and `store_step` now: the pipeline may
+  // forget what is final (the store keeps it), so a session's memory does not
+  // grow with its length.
+  if (step != nullptr) pipeline_->ForgetFinal(final_poses_in_memory_);
   if (events.empty()) return;
   for (auto& e : events) {
     if (e.has_pose()) *e.mutable_pose()->mutable_emit_time() = PreciseNow();

@@ -28,7 +28,8 @@ namespace slapse::server {
 
 class SessionRunner {
  public:
-  explicit SessionRunner(std::shared_ptr<Session> session);
+  // final_poses_in_memory: SessionManagerOptions's (Pipeline::ForgetFinal).
+  SessionRunner(std::shared_ptr<Session> session, size_t final_poses_in_memory);
   // Runs the session to its end (a terminal state).
   void Run();
 
@@ -64,6 +65,7 @@ class SessionRunner {
   void EndStream(const Status& status);
 
   const std::shared_ptr<Session> session_;
+  const size_t final_poses_in_memory_;
   std::unique_ptr<IngestSource> source_;
   std::atomic<int64_t> deadline_ns_{0};
   std::atomic<bool> timed_out_{false};

@@ -202,6 +202,7 @@ class ServiceE2eTest : public ::testing::Test {
     o.port = 0;
     o.sessions.max_sessions = 2;
     o.sessions.upload_buffer_bytes = 256 << 10;  // the uploads feel backpressure
+    o.sessions.final_poses_in_memory = 8;        // the pipelines forget: results from the store
     o.shutdown_grace_s = 1;
     auto server = SlapseServer::Start(o);
     ASSERT_TRUE(server.ok()) << server.status().ToString();

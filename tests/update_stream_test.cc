@@ -114,26 +114,31 @@ void CheckAndApply(const Pipeline& pipeline, const PipelineStep& step, const Ste
   for (const PlaneChange& c : u.planes) m->planes[c.track_id] = *c.plane;
 }
 
+// The pipeline holds the tail of what the mirror holds (Pipeline::ForgetFinal
+// drops the head; pose numbers stay absolute).
 void ExpectMirrorsPipeline(const Mirror& m, const Pipeline& pipeline) {
   const auto& traj = pipeline.trajectory();
-  ASSERT_EQ(m.trajectory.size(), traj.size());
+  const size_t anchors_base = pipeline.anchors_forgotten();
+  ASSERT_EQ(m.trajectory.size(), anchors_base + traj.size());
   for (size_t i = 0; i < traj.size(); ++i) {
-    EXPECT_EQ(m.trajectory[i].index, traj[i].index);
-    EXPECT_EQ(m.trajectory[i].timestamp_s, traj[i].timestamp_s);
-    EXPECT_EQ(m.trajectory[i].world_from_cam.translation, traj[i].world_from_cam.translation);
-    EXPECT_EQ(m.trajectory[i].world_from_cam.rotation.coeffs(),
-              traj[i].world_from_cam.rotation.coeffs());
+    const TimedPose& mt = m.trajectory[anchors_base + i];
+    EXPECT_EQ(mt.index, traj[i].index);
+    EXPECT_EQ(mt.timestamp_s, traj[i].timestamp_s);
+    EXPECT_EQ(mt.world_from_cam.translation, traj[i].world_from_cam.translation);
+    EXPECT_EQ(mt.world_from_cam.rotation.coeffs(), traj[i].world_from_cam.rotation.coeffs());
   }
   const auto& poses = pipeline.poses();
-  ASSERT_EQ(m.poses.size(), poses.size());
+  const size_t base = pipeline.poses_forgotten();
+  ASSERT_EQ(m.poses.size(), base + poses.size());
   for (size_t i = 0; i < poses.size(); ++i) {
-    EXPECT_EQ(m.poses[i].pose.index, poses[i].pose.index);
-    EXPECT_EQ(m.poses[i].pose.timestamp_s, poses[i].pose.timestamp_s);
-    EXPECT_EQ(m.poses[i].pose.world_from_cam.translation, poses[i].pose.world_from_cam.translation);
-    EXPECT_EQ(m.poses[i].quality.kind, poses[i].quality.kind);
-    EXPECT_EQ(m.poses[i].revision, poses[i].revision);
+    const FramePose& mp = m.poses[base + i];
+    EXPECT_EQ(mp.pose.index, poses[i].pose.index);
+    EXPECT_EQ(mp.pose.timestamp_s, poses[i].pose.timestamp_s);
+    EXPECT_EQ(mp.pose.world_from_cam.translation, poses[i].pose.world_from_cam.translation);
+    EXPECT_EQ(mp.quality.kind, poses[i].quality.kind);
+    EXPECT_EQ(mp.revision, poses[i].revision);
   }
-  ASSERT_EQ(m.planes.size(), pipeline.plane_map().size());
+  ASSERT_EQ(m.planes.size(), pipeline.planes_forgotten() + pipeline.plane_map().size());
   for (const auto& [id, p] : pipeline.plane_map()) {
     ASSERT_TRUE(m.planes.count(id)) << id;
     const MapPlane& q = m.planes.at(id);
@@ -163,8 +168,10 @@ class UpdateStreamTest : public ::testing::Test {
   // revise_every > 0: after every that many steps, the latest FRAME pose
   // still revisable is revised (moved by 1 cm), as a window refiner would;
   // *revisions counts the revised poses the updates carried.
+  // keep_final >= 0: after every step, Pipeline::ForgetFinal(keep_final);
+  // *forgotten is then the poses it dropped by the end.
   void Run(const PipelineOptions& options, int* rescales, int revise_every = 0,
-           int* revisions = nullptr) {
+           int* revisions = nullptr, int keep_final = -1, size_t* forgotten = nullptr) {
     ASSERT_NE(drive_, nullptr);
     auto reader = MvReader::Open(drive_->video_path);
     ASSERT_TRUE(reader.ok()) << reader.status().ToString();
@@ -190,13 +197,26 @@ class UpdateStreamTest : public ::testing::Test {
       for (const FramePose& p : u.frame_poses) {
         if (revisions != nullptr && p.revision > 0) ++*revisions;
       }
+      if (keep_final >= 0) {
+        const bool may_change = pipeline.ScaleMayChange();
+        pipeline.ForgetFinal(static_cast<size_t>(keep_final));
+        // Nothing goes while a rescale could still need it; then the final
+        // poses kept stay bounded.
+        if (may_change) {
+          EXPECT_EQ(pipeline.poses_forgotten(), 0u);
+        }
+        EXPECT_LE(pipeline.first_revisable_pose() - pipeline.poses_forgotten(),
+                  may_change ? pipeline.first_revisable_pose() : 2u * keep_final + 16);
+        if (forgotten != nullptr) *forgotten = pipeline.poses_forgotten();
+      }
       if (revise_every > 0 && steps % revise_every == 0) {
         const auto& poses = pipeline.poses();
-        for (size_t i = poses.size(); i-- > pipeline.first_revisable_pose();) {
-          if (poses[i].quality.kind != PoseKind::kFrame) continue;
-          Rigid3d moved = poses[i].pose.world_from_cam;
+        const size_t base = pipeline.poses_forgotten();
+        for (size_t n = base + poses.size(); n-- > pipeline.first_revisable_pose();) {
+          if (poses[n - base].quality.kind != PoseKind::kFrame) continue;
+          Rigid3d moved = poses[n - base].pose.world_from_cam;
           moved.translation.x() += 0.01;
-          ASSERT_TRUE(pipeline.RevisePose(i, moved).ok());
+          ASSERT_TRUE(pipeline.RevisePose(n, moved).ok());
           break;
         }
         if (pipeline.first_revisable_pose() > 0) {  // final poses stay final
@@ -240,6 +260,35 @@ TEST_F(UpdateStreamTest, RevisedPosesAreSentAgain) {
   int rescales = 0, revisions = 0;
   Run(o, &rescales, 3, &revisions);
   EXPECT_GT(revisions, 3);
+}
+
+// Bounded memory (the service's long sessions): forgetting the final poses
+// after every step changes nothing a consumer of the updates sees -- the
+// mirror equals what the pipeline forgot followed by what it holds, after
+// every step, with revisions going on in the revisable tail.
+TEST_F(UpdateStreamTest, ForgettingFinalPosesLosesNothingSent) {
+  PipelineOptions o;
+  o.revisable_tail_poses = 12;
+  int rescales = 0, revisions = 0;
+  size_t forgotten = 0;
+  Run(o, &rescales, 3, &revisions, /*keep_final=*/4, &forgotten);
+  EXPECT_GT(revisions, 3);
+  EXPECT_GT(forgotten, 40u);
+}
+
+// Under the camera-height source nothing is forgotten until the scale is
+// fixed (a rescale re-sends everything) or its road_deadline_s passed; then
+// forgetting starts, and the updates still mirror the run.
+TEST_F(UpdateStreamTest, NothingIsForgottenWhileTheScaleMayChange) {
+  PipelineOptions o;
+  o.scale.source = ScaleOptions::Source::kCameraHeight;
+  o.scale.camera_height_m = 1.5;
+  o.scale.road_deadline_s = 0.5;
+  int rescales = 0;
+  size_t forgotten = 0;
+  Run(o, &rescales, 0, nullptr, /*keep_final=*/4, &forgotten);
+  EXPECT_LE(rescales, 1);
+  EXPECT_GT(forgotten, 20u);
 }
 
 // A loss (the stream breaks off and 12 frames never arrive): the trajectory

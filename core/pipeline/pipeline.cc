@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <set>
 #include <utility>
 
 #include "core/common/plane.h"
@@ -96,12 +97,21 @@ PipelineStep Pipeline::Process(const FrontEndStep& front) {
       step.times.refine_ms = MsSince(t1);
     }
     trajectory_.push_back({pair.later_index, pair.later_timestamp_s, world_from_cam_});
+    if (first_pose_s_ < 0) first_pose_s_ = pair.earlier_timestamp_s;
     RecordPlanes(step, pair);
-    if (options_.scale.source == ScaleOptions::Source::kCameraHeight && !metric_) {
+    if (ScaleMayChange()) {
       if (options_.window_refine) {
         MaybeFixScaleFromWindowRoad(&step);
       } else {
         MaybeFixScaleFromRoad();
+      }
+      const double deadline_s = options_.scale.road_deadline_s;
+      if (!metric_ && deadline_s > 0 && pair.later_timestamp_s - first_pose_s_ > deadline_s) {
+        scale_given_up_ = true;
+        step.scale_note = "metric scale not observable: no road plane fixed it within " +
+                          std::to_string(static_cast<int>(deadline_s)) +
+                          " s of the first pose (road_deadline_s); the trajectory stays up to "
+                          "scale";
       }
     }
     step.world_from_cam = world_from_cam_;
@@ -116,8 +126,8 @@ PipelineStep Pipeline::Process(const FrontEndStep& front) {
   // last revisable_tail_poses stay open (0: none; the window refiner does not
   // revise emitted poses, see RefineWindow).
   const size_t tail = static_cast<size_t>(std::max(0, options_.revisable_tail_poses));
-  first_revisable_pose_ =
-      std::max(first_revisable_pose_, poses_.size() - std::min(tail, poses_.size()));
+  const size_t posed = poses_forgotten_ + poses_.size();
+  first_revisable_pose_ = std::max(first_revisable_pose_, posed - std::min(tail, posed));
   step.metric = metric_;
   return step;
 }
@@ -361,15 +371,16 @@ void Pipeline::MaybeFixScaleFromWindowRoad(PipelineStep* step) {
                      " window pairs";
 }
 
-Status Pipeline::RevisePose(size_t i, const Rigid3d& world_from_cam) {
-  if (i >= poses_.size()) {
-    return OutOfRangeError("pose " + std::to_string(i) + " of " + std::to_string(poses_.size()));
+Status Pipeline::RevisePose(size_t n, const Rigid3d& world_from_cam) {
+  const size_t posed = poses_forgotten_ + poses_.size();
+  if (n >= posed) {
+    return OutOfRangeError("pose " + std::to_string(n) + " of " + std::to_string(posed));
   }
-  if (i < first_revisable_pose_) {
-    return FailedPreconditionError("pose " + std::to_string(i) + " is final (first revisable: " +
+  if (n < first_revisable_pose_) {
+    return FailedPreconditionError("pose " + std::to_string(n) + " is final (first revisable: " +
                                    std::to_string(first_revisable_pose_) + ")");
   }
-  FramePose& p = poses_[i];
+  FramePose& p = poses_[n - poses_forgotten_];  // revisable poses are never forgotten
   p.pose.world_from_cam = world_from_cam;
   ++p.revision;
   auto anchor = std::lower_bound(trajectory_.begin(), trajectory_.end(), p.pose.index,
@@ -380,6 +391,44 @@ Status Pipeline::RevisePose(size_t i, const Rigid3d& world_from_cam) {
     if (anchor + 1 == trajectory_.end()) world_from_cam_ = world_from_cam;
   }
   return Status::Ok();
+}
+
+bool Pipeline::ScaleMayChange() const {
+  return options_.scale.source == ScaleOptions::Source::kCameraHeight && !metric_ &&
+         !scale_given_up_;
+}
+
+void Pipeline::ForgetFinal(size_t keep_final_poses) {
+  if (ScaleMayChange()) return;
+  // Final poses are those before first_revisable_pose_; drop in chunks (of
+  // at least as many as are kept, plus 16) so that the erase is amortised.
+  const size_t final_kept = first_revisable_pose_ - poses_forgotten_;
+  if (final_kept <= 2 * keep_final_poses + 16) return;
+  const size_t drop = final_kept - keep_final_poses;
+  poses_.erase(poses_.begin(), poses_.begin() + static_cast<std::ptrdiff_t>(drop));
+  poses_forgotten_ += drop;
+  // The anchors before the first pose kept, but the last two (the next step
+  // continues from them).
+  const int64_t first_kept_index = poses_.front().pose.index;
+  size_t anchors = 0;
+  while (anchors + 2 < trajectory_.size() && trajectory_[anchors].index < first_kept_index) {
+    ++anchors;
+  }
+  trajectory_.erase(trajectory_.begin(),
+                    trajectory_.begin() + static_cast<std::ptrdiff_t>(anchors));
+  anchors_forgotten_ += anchors;
+  // Planes the filter no longer holds (their ids are never reused) and that
+  // were last seen before the first anchor kept.
+  std::set<int> held;
+  for (const PlaneTrack& t : ekf_.planes()) held.insert(t.track_id);
+  for (auto it = plane_map_.begin(); it != plane_map_.end();) {
+    if (!held.count(it->first) && it->second.last_seen_index < trajectory_.front().index) {
+      it = plane_map_.erase(it);
+      ++planes_forgotten_;
+    } else {
+      ++it;
+    }
+  }
 }
 
 }  // namespace slapse

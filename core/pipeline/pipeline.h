@@ -51,6 +51,11 @@ struct ScaleOptions {
   // this many of the window's pairs observed it; until then the step's
   // scale_note says the metric scale is not observable yet.
   int road_min_window_pairs = 3;
+  // kCameraHeight: stream seconds after the first pose within which the road
+  // must fix the scale. Past it the run stays up to scale for good (the
+  // step's scale_note says so) and the scale can no longer change, so a long
+  // run can forget its final results (Pipeline::ForgetFinal). 0: no deadline.
+  double road_deadline_s = 60.0;
 };
 
 // The front end's options (merge, infinity, extraction) and the filter's.
@@ -148,24 +153,45 @@ class Pipeline {
   // Later frames still need larger indices and timestamps.
   void Break();
 
-  // The anchors' poses (one per tracked anchor).
+  // Pose numbers: the n-th pose of the run (0-based, in display order) has
+  // number n for good. Without ForgetFinal poses()[n] is pose n; after it
+  // poses()[k] is pose poses_forgotten() + k, and likewise for trajectory()
+  // and anchors_forgotten().
+  //
+  // The anchors' poses (one per tracked anchor; those not forgotten).
   const std::vector<TimedPose>& trajectory() const { return trajectory_; }
   // Every posed frame in display order, anchors included, with its quality
-  // (the trajectory `run` writes and the service reports).
+  // (the trajectory `run` writes and the service reports; those not forgotten).
   const std::vector<FramePose>& poses() const { return poses_; }
-  // poses()[i] for i >= this may still be revised (RevisePose); those
-  // before are final. Never decreases. After each step it is
-  // poses().size() - revisable_tail_poses (or where it was, if later).
+  // Pose numbers >= this may still be revised (RevisePose); those before are
+  // final. Never decreases. After each step it is the number of poses so far
+  // minus revisable_tail_poses (or where it was, if later).
   size_t first_revisable_pose() const { return first_revisable_pose_; }
-  // Replaces poses()[i]'s pose (e.g. a window refinement moved an anchor,
+  // Replaces pose number n's pose (e.g. a window refinement moved an anchor,
   // and with it the frames between): its revision goes up, an anchor's entry
   // in trajectory() follows, and UpdateStream sends it again.
-  // FAILED_PRECONDITION for a final pose (i < first_revisable_pose()),
-  // OUT_OF_RANGE past the end.
-  Status RevisePose(size_t i, const Rigid3d& world_from_cam);
-  // Every plane the filter ever held, by track id.
+  // FAILED_PRECONDITION for a final pose (n < first_revisable_pose()),
+  // OUT_OF_RANGE past the last pose.
+  Status RevisePose(size_t n, const Rigid3d& world_from_cam);
+  // Every plane the filter ever held, by track id (those not forgotten).
   const std::map<int, MapPlane>& plane_map() const { return plane_map_; }
   bool metric() const { return metric_; }
+
+  // Bounded memory for runs of any length (the service, whose store keeps
+  // the results): drops the final poses but the last `keep_final_poses`,
+  // the anchors before the first pose kept (the last two always stay), and
+  // the map planes the filter no longer holds that were last seen before the
+  // first anchor kept. Call it only once the last step's updates were taken
+  // (UpdateStream::Next) and used: what it drops is gone. It drops nothing
+  // while ScaleMayChange(), since fixing the scale rescales and re-sends
+  // everything seen so far.
+  void ForgetFinal(size_t keep_final_poses);
+  size_t poses_forgotten() const { return poses_forgotten_; }
+  size_t anchors_forgotten() const { return anchors_forgotten_; }
+  size_t planes_forgotten() const { return planes_forgotten_; }
+  // Whether a later step may still fix the metric scale (kCameraHeight, not
+  // metric yet, its road_deadline_s not passed).
+  bool ScaleMayChange() const;
 
  private:
   PipelineStep Process(const FrontEndStep& front);
@@ -204,6 +230,9 @@ class Pipeline {
   FramePoser frame_poser_;
   std::vector<FramePose> poses_;
   size_t first_revisable_pose_ = 0;
+  size_t poses_forgotten_ = 0, anchors_forgotten_ = 0, planes_forgotten_ = 0;
+  double first_pose_s_ = -1.0;   // the first tracked anchor's time (-1: none yet)
+  bool scale_given_up_ = false;  // kCameraHeight: road_deadline_s passed while up to scale
 };
 
 }  // namespace slapse

@@ -14,12 +14,14 @@
 // added; a pose the pipeline changes later (its revision counter goes up;
 // only poses at or after Pipeline::first_revisable_pose() can change) goes
 // out again with the new revision. Applying the updates in order gives
-// exactly Pipeline::poses().
+// exactly Pipeline::poses(), preceded by what Pipeline::ForgetFinal dropped
+// (ForgetFinal only drops what was sent and can no longer change).
 //
 // Thread-safety: none; one UpdateStream per Pipeline, fed in step order.
 #pragma once
 
 #include <cstdint>
+#include <deque>
 #include <map>
 #include <set>
 #include <string>
@@ -89,11 +91,13 @@ class UpdateStream {
   void CollectFramePoses(const Pipeline& pipeline, std::vector<FramePose>* out);
 
   std::set<int> live_planes_;  // track ids the filter held after the previous step
-  size_t points_sent_ = 0;     // trajectory points already in an update
-  // Pipeline::poses(): the revision sent of each pose sent, and where the
-  // poses that may have been revised since the last update begin.
-  std::vector<int> pose_revisions_sent_;
+  size_t points_sent_ = 0;     // trajectory points (anchors) already in an update
+  // Pipeline::poses(), by pose number: how many were sent, where those that
+  // may have been revised since the last update begin, and the revision sent
+  // of each from there on (revisions_sent_[k]: pose revisable_from_ + k).
+  size_t poses_sent_ = 0;
   size_t revisable_from_ = 0;
+  std::deque<int> revisions_sent_;
   bool metric_ = false;  // the scale of what was sent
 };
 
