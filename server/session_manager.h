@@ -61,6 +61,11 @@ struct SessionManagerOptions {
   // A finished session's results are deleted this long after it ended (it
   // becomes EXPIRED, with a StateChange saying so); 0 = kept until deleted.
   int64_t retention_ttl_s = 0;
+  // The replica this server is in a cluster (api/session_name.h): new
+  // sessions are named "sessions/<replica_id>-<random>"; a call for a
+  // session of another replica is NOT_FOUND naming both (misrouted). "" =
+  // a single server ("sessions/<random>").
+  std::string replica_id;
 };
 
 // NOT_FOUND for session `name`: "no session '<name>' on this server" (also
