@@ -13,9 +13,12 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <fstream>
 #include <functional>
 #include <map>
@@ -94,6 +97,19 @@ bool Eventually(const std::function<bool()>& done) {
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
   }
   return done();
+}
+
+// Median wall time of `call` over 21 runs, ms. Printed, never asserted.
+double MedianMs(const std::function<void()>& call) {
+  std::vector<double> ms;
+  for (int i = 0; i < 21; ++i) {
+    const auto t0 = std::chrono::steady_clock::now();
+    call();
+    ms.push_back(
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+  }
+  std::sort(ms.begin(), ms.end());
+  return ms[ms.size() / 2];
 }
 
 client::ClientOptions WithToken(const std::string& token) {
@@ -296,6 +312,30 @@ TEST_F(ClusterTest, RoutesByOwnerListsAllAndSurvivesAReplicaKilled) {
   EXPECT_TRUE(ListAll(*other_tenant, 10, &theirs_unreachable).empty());
   EXPECT_TRUE(theirs_unreachable.empty());
 
+  // What the proxy hop and the fan-out cost (printed for docs/DEPLOY.md).
+  {
+    const int owner = ReplicaIndex(names[0]);
+    auto direct = SlapseClient::Connect(Address(owner), WithToken(kToken));
+    auto stub = v1::SlapseService::NewStub(
+        grpc::CreateChannel(Address(owner), grpc::InsecureChannelCredentials()));
+    const double get_proxy = MedianMs([&] { (void)client_->GetSession(names[0]); });
+    const double get_direct = MedianMs([&] { (void)direct->GetSession(names[0]); });
+    const double list_proxy = MedianMs([&] { (void)ListAll(*client_, 50); });
+    const double list_local = MedianMs([&] {
+      grpc::ClientContext context;
+      context.AddMetadata("authorization", std::string("Bearer ") + kToken);
+      context.AddMetadata(api::kFanoutHeader, api::kFanoutLocal);
+      v1::ListSessionsRequest request;
+      v1::ListSessionsResponse response;
+      (void)stub->ListSessions(&context, request, &response);
+    });
+    std::printf(
+        "cluster-timing: median of 21, ms: GetSession via proxy %.2f, direct %.2f; "
+        "ListSessions (%d sessions) via proxy with fan-out over %d replicas %.2f, one replica's "
+        "own %.2f\n",
+        get_proxy, get_direct, kSessions, kReplicas, list_proxy, list_local);
+  }
+
   // Stop and delete reach the owner.
   auto live = client_->CreateSession(UploadRequest());
   ASSERT_TRUE(live.ok()) << live.status().ToString();
@@ -308,12 +348,16 @@ TEST_F(ClusterTest, RoutesByOwnerListsAllAndSurvivesAReplicaKilled) {
   // Kill -9 the owner of the first session.
   const int victim = ReplicaIndex(names[0]);
   replicas_[victim]->Kill();
+  const auto killed = std::chrono::steady_clock::now();
   // Its sessions: UNAVAILABLE naming it (once the proxy's check saw it go).
   ASSERT_TRUE(Eventually([&] {
     auto s = client_->GetSession(names[0]);
     return s.status().code() == StatusCode::kUnavailable &&
            s.status().message().find("replica " + ids_[victim]) != std::string::npos;
   })) << client_->GetSession(names[0]).status().ToString();
+  std::printf(
+      "cluster-timing: kill -9 -> its sessions UNAVAILABLE naming it: %.0f ms\n",
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - killed).count());
   std::vector<std::string> survivors;
   for (int k = 0; k < kSessions; ++k) {
     if (ReplicaIndex(names[k]) == victim) {
@@ -341,7 +385,12 @@ TEST_F(ClusterTest, RoutesByOwnerListsAllAndSurvivesAReplicaKilled) {
 
   // Restarted on its store: its sessions are back as they were.
   replicas_[victim] = Serve(victim);
+  const auto restarted = std::chrono::steady_clock::now();
   ASSERT_TRUE(Eventually([&] { return ReachesReplica(victim); })) << "see " << dir_;
+  std::printf(
+      "cluster-timing: restart -> reachable through the proxy: %.0f ms\n",
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - restarted)
+          .count());
   for (int k = 0; k < kSessions; ++k) {
     auto s = client_->GetSession(names[k]);
     ASSERT_TRUE(s.ok()) << names[k] << ": " << s.status().ToString();

@@ -122,6 +122,10 @@ cat <<CFG
 # fewer new sessions.
 backend any
     balance leastconn
+    # A replica that died but is not marked down yet refuses the connection:
+    # the call (which never reached it) goes to another replica at once.
+    retries 2
+    option redispatch 1
 CFG
 http_errors "no slapse replica answered (all down or restarting?)"
 for r in "${replicas[@]}"; do server_line "${r%%=*}" "${r#*=}"; done
@@ -130,8 +134,9 @@ for r in "${replicas[@]}"; do
   echo
   echo "backend replica_$id"
   # Between a replica's death and the health check that notices it, a call
-  # fails here (connection refused) instead of at the frontend's rule.
-  echo "    retries 1"
+  # fails here (connection refused) instead of at the frontend's rule; at
+  # once: a retry would wait a second for the same dead server.
+  echo "    retries 0"
   http_errors "replica $id did not answer (down or restarting): its sessions answer again when it is back"
   server_line "$id" "${r#*=}"
 done
