@@ -2,7 +2,8 @@
 // their replica (api/session_name.h), the peer list, and ListSessions fanned
 // out over real in-process servers on loopback (server/peers.h): the query's
 // filter, order and pages over the union, a misrouted call's error, a peer
-// that is down named in unreachable_peers.
+// that is down named in unreachable_peers, and the fan-out over mTLS with the
+// caller's token forwarded (a certificate made by the openssl CLI).
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -14,6 +15,7 @@
 #include "api/session_name.h"
 #include "client/lib/client.h"
 #include "server/server.h"
+#include "tests/test_streams.h"
 
 namespace slapse {
 namespace {
@@ -179,6 +181,74 @@ TEST_F(FanoutTest, APeerDownIsNamedNotSilentlyMissing) {
                 "127.0.0.1:" + std::to_string(ports_[1]) + ": UNAVAILABLE", 0),
             0u)
       << all->unreachable_peers(0);
+}
+
+// Two replicas with TLS, client certificates (mTLS) and bearer tokens: the
+// fan-out calls its peer over TLS with the server's own certificate and
+// forwards the caller's token. One self-signed certificate (CA:TRUE, for
+// 127.0.0.1, server and client use) is the servers', the client's and the CA.
+TEST(FanoutTlsTest, AsksPeersOverMutualTlsWithTheCallersToken) {
+  const std::string dir = testing::MakeTempDir("cluster_tls");
+  const std::string key = dir + "/key.pem", cert = dir + "/cert.pem";
+  ASSERT_EQ(testing::RunCommand(
+                "openssl req -x509 -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes "
+                "-keyout " +
+                key + " -out " + cert +
+                " -days 2 -subj /CN=localhost -addext subjectAltName=IP:127.0.0.1 "
+                "-addext extendedKeyUsage=serverAuth,clientAuth >/dev/null 2>&1"),
+            0);
+  testing::WriteFileBytes(dir + "/tokens.json",
+                          R"({"tokens": [{"token": "tls-token-0123456789", "tenant": "t"}]})");
+  std::vector<int> ports;
+  for (int i = 0; i < 2; ++i) {
+    server::ServerOptions o;
+    o.port = 0;
+    auto probe = server::SlapseServer::Start(o);
+    ASSERT_TRUE(probe.ok());
+    ports.push_back((*probe)->port());
+  }
+  std::vector<std::unique_ptr<server::SlapseServer>> servers;
+  std::vector<std::unique_ptr<client::SlapseClient>> clients;
+  client::ClientOptions c;
+  c.tls = true;
+  c.tls_ca_file = cert;
+  c.tls_cert_file = cert;
+  c.tls_key_file = key;
+  c.token = "tls-token-0123456789";
+  for (int i = 0; i < 2; ++i) {
+    server::ServerOptions o;
+    o.port = ports[i];
+    o.sessions.replica_id = "t" + std::to_string(i);
+    o.peers = {"127.0.0.1:" + std::to_string(ports[0]), "127.0.0.1:" + std::to_string(ports[1])};
+    o.auth.tls_cert_file = cert;
+    o.auth.tls_key_file = key;
+    o.auth.tls_client_ca_file = cert;
+    o.auth.tokens_file = dir + "/tokens.json";
+    o.peer_tls_ca_file = cert;
+    auto s = server::SlapseServer::Start(o);
+    ASSERT_TRUE(s.ok()) << s.status().ToString();
+    servers.push_back(std::move(*s));
+    clients.push_back(client::SlapseClient::Connect(o.peers[i], c));
+  }
+  v1::Session request;
+  request.mutable_intrinsics()->set_fx_px(500);
+  request.mutable_intrinsics()->set_fy_px(500);
+  request.mutable_intrinsics()->set_cx_px(320);
+  request.mutable_intrinsics()->set_cy_px(240);
+  request.mutable_upload();
+  std::set<std::string> names;
+  for (auto& client : clients) {
+    auto s = client->CreateSession(request);
+    ASSERT_TRUE(s.ok()) << s.status().ToString();
+    names.insert(s->name());
+  }
+  auto all = clients[0]->ListSessions(10, "", v1::Session::STATE_UNSPECIFIED);
+  ASSERT_TRUE(all.ok()) << all.status().ToString();
+  EXPECT_EQ(all->unreachable_peers_size(), 0)
+      << (all->unreachable_peers_size() ? all->unreachable_peers(0) : "");
+  std::set<std::string> listed;
+  for (const auto& s : all->sessions()) listed.insert(s.name());
+  EXPECT_EQ(listed, names);
 }
 
 }  // namespace
