@@ -121,6 +121,8 @@ client::ClientOptions WithToken(const std::string& token) {
 class ClusterTest : public ::testing::Test {
  protected:
   void SetUp() override {
+    ASSERT_EQ(access(SLAPSE_HAPROXY, X_OK), 0)
+        << "haproxy not found (" << SLAPSE_HAPROXY << "): bash deploy/install-deps.sh";
     dir_ = testing::MakeTempDir("cluster_test");
     auto drive =
         testing::SimulateTestDrive("cluster_drive", testing::SmallMpeg2DriveOptions(5, 2.0));
