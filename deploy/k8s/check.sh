@@ -8,7 +8,9 @@
 #      StatefulSet's pods (slapse-N.<serviceName>:50051), --replica-id is the
 #      pod name from the downward API;
 #   2. checks that haproxy.cfg is deploy/k8s/haproxy-cfg.sh's output for those
-#      replicas and that HAProxy accepts it (`haproxy -c`);
+#      replicas (full DNS names in the objects' namespace, "default" unless
+#      kustomization.yaml sets one: HAProxy's resolver does not use search
+#      domains) and that HAProxy accepts it (`haproxy -c`);
 #   3. tries `kubectl apply --dry-run=client`, which needs an API server for
 #      discovery: without one it says so (not counted as a pass; pass
 #      --require-api to make it an error).
@@ -87,7 +89,10 @@ for name, ss in by_kind.get("StatefulSet", {}).items():
     pod_name = [e for e in c.get("env", []) if e.get("valueFrom", {}).get("fieldRef", {}).get("fieldPath") == "metadata.name"]
     if not pod_name or args.get("replica-id") != f"$({pod_name[0]['name']})":
         err(f"StatefulSet {name}: --replica-id is not the pod name (downward API metadata.name)")
-    replicas += [f"{name}-{i}={w}" for i, w in enumerate(want)]
+    # HAProxy's resolver ignores resolv.conf's search domains: full names.
+    ns = ss["metadata"].get("namespace", "default")
+    replicas += [f"{name}-{i}={name}-{i}.{ss['spec']['serviceName']}.{ns}.svc.cluster.local:50051"
+                 for i in range(n)]
 if errors:
     print("\n".join("check: " + e for e in errors), file=sys.stderr); sys.exit(1)
 print(" ".join(replicas))
