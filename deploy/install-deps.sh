@@ -7,11 +7,12 @@
 #                              nothing else (the Dockerfile's runtime stage)
 #   install-deps.sh --camera   a simulated camera: ffmpeg (deploy/compose camera image)
 #   install-deps.sh --prometheus   Prometheus (deploy/compose prometheus image)
+#   install-deps.sh --haproxy  HAProxy (the k8s proxy image, deploy/k8s/proxy.yaml)
 set -euo pipefail
 MODE="${1:-all}"
 case "$MODE" in
-  all | --build | --runtime | --camera | --prometheus) ;;
-  *) echo "install-deps: unknown mode '$MODE' (none, --build, --runtime, --camera, --prometheus)" >&2; exit 2 ;;
+  all | --build | --runtime | --camera | --prometheus | --haproxy) ;;
+  *) echo "install-deps: unknown mode '$MODE' (none, --build, --runtime, --camera, --prometheus, --haproxy)" >&2; exit 2 ;;
 esac
 
 SUDO=""
@@ -63,6 +64,9 @@ TEST_PACKAGES=(
   # tests: the dashboard's browser test (tests/dashboard_test.cc) drives a real headless
   # Chromium with playwright-core from npm (tests/web/package-lock.json, `npm ci`)
   chromium nodejs
+  # tests: the local cluster test (tests/cluster_test.cc, external) routes gRPC by
+  # session owner through a real HAProxy (deploy/k8s/haproxy-cfg.sh)
+  haproxy
 )
 # npm: Debian's package, unless the nodejs installed brings its own (NodeSource's does,
 # and conflicts with Debian's npm).
@@ -82,6 +86,7 @@ case "$MODE" in
   --runtime) PACKAGES=("${RUNTIME_PACKAGES[@]}") ;;
   --camera) PACKAGES=(ffmpeg) ;;
   --prometheus) PACKAGES=(prometheus) ;;
+  --haproxy) PACKAGES=(haproxy) ;;
 esac
 
 missing=()

@@ -6,6 +6,7 @@
 #include <grpcpp/server_builder.h>
 
 #include <algorithm>
+#include "api/session_name.h"
 #include "server/dashboard.h"
 
 namespace slapse::server {
@@ -38,7 +39,37 @@ SlapseServer::SlapseServer(const ServerOptions& options, std::unique_ptr<Authent
       auth_(std::move(auth)),
       manager_(options.sessions),
       service_(&manager_, auth_.get()),
-      metrics_(std::make_unique<ServerMetrics>(&manager_)) {}
+      metrics_(std::make_unique<ServerMetrics>(&manager_)) {
+  if (!options.peers.empty()) {
+    PeerOptions p;
+    p.addresses = options.peers;
+    p.self_replica = options.sessions.replica_id;
+    p.timeout_s = options.peer_timeout_s;
+    p.tls = options.auth.tls();
+    p.tls_ca_file = options.peer_tls_ca_file;
+    p.tls_cert_file = options.auth.tls_cert_file;
+    p.tls_key_file = options.auth.tls_key_file;
+    peers_ = std::make_unique<PeerFanout>(std::move(p));
+  }
+  service_.SetCluster(options.sessions.replica_id, peers_.get());
+}
+
+// The cluster options: a well-formed replica id, and peers only with one.
+static Status CheckClusterOptions(const ServerOptions& options) {
+  if (!options.sessions.replica_id.empty()) {
+    SLAPSE_RETURN_IF_ERROR(api::CheckReplicaId(options.sessions.replica_id));
+  }
+  if (options.peers.empty()) return Status::Ok();
+  if (options.sessions.replica_id.empty()) {
+    return InvalidArgumentError(
+        "peers need a replica id (serve --replica-id), so that session "
+        "names carry their owner");
+  }
+  PeerOptions p;
+  p.addresses = options.peers;
+  p.timeout_s = options.peer_timeout_s;
+  return p.Check();
+}
 
 Status SlapseServer::StartHttp() {
   if (options_.http_port == 0) return Status::Ok();
@@ -68,6 +99,7 @@ StatusOr<std::unique_ptr<SlapseServer>> SlapseServer::Start(const ServerOptions&
     return InvalidArgumentError("http_port must be in [0, 65535] (or kAnyFreePort), got " +
                                 std::to_string(options.http_port));
   }
+  SLAPSE_RETURN_IF_ERROR(CheckClusterOptions(options));
   SLAPSE_RETURN_IF_ERROR(CheckListenAddress(options.address, options.auth));
   auto credentials = MakeServerCredentials(options.auth);
   if (!credentials.ok()) return credentials.status();

@@ -18,6 +18,7 @@
 #include <memory>
 #include <mutex>
 #include <string>
+#include <vector>
 
 #include <grpcpp/server.h>
 
@@ -25,6 +26,7 @@
 #include "server/auth.h"
 #include "server/http_server.h"
 #include "server/metrics.h"
+#include "server/peers.h"
 #include "server/service.h"
 #include "server/session_manager.h"
 
@@ -49,6 +51,14 @@ struct ServerOptions {
   // `slapse serve` uses 8080.
   static constexpr int kAnyFreePort = -1;
   int http_port = 0;
+  // Scale-out (docs/DEPLOY.md): the other replicas ("host:port"; this one
+  // may be listed too), which ListSessions asks as well (server/peers.h).
+  // Needs sessions.replica_id. With TLS (auth.tls()), the peers are called
+  // over TLS: peer_tls_ca_file signed their certificates ("" = the system's
+  // roots) and this server's certificate is its client certificate.
+  std::vector<std::string> peers;
+  std::string peer_tls_ca_file;
+  double peer_timeout_s = 3.0;
 };
 
 class SlapseServer {
@@ -84,6 +94,7 @@ class SlapseServer {
   ServerOptions options_;
   std::unique_ptr<Authenticator> auth_;
   SessionManager manager_;
+  std::unique_ptr<PeerFanout> peers_;  // null without options.peers; before service_
   SlapseServiceImpl service_;
   std::unique_ptr<ServerMetrics> metrics_;  // before server_: its interceptors use it
   std::unique_ptr<grpc::Server> server_;

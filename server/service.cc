@@ -1,5 +1,10 @@
 #include "server/service.h"
 
+#include <algorithm>
+#include <future>
+
+#include "api/list_query.h"
+#include "api/session_name.h"
 #include "api/validate.h"
 #include "server/grpc_status.h"
 
@@ -26,6 +31,13 @@ grpc::Status Reply(StatusOr<T> result, T* response) {
   *response = std::move(*result);
   Redact(response);
   return grpc::Status::OK;
+}
+
+// The value of metadata `key` sent by the client, "" if none.
+std::string MetadataValue(const grpc::ServerContext& context, const char* key) {
+  auto it = context.client_metadata().find(key);
+  if (it == context.client_metadata().end()) return "";
+  return std::string(it->second.data(), it->second.size());
 }
 
 // Events per WatchSession read, and how long one read waits for news.
@@ -80,7 +92,51 @@ grpc::Status SlapseServiceImpl::ListSessions(grpc::ServerContext* context,
                                              v1::ListSessionsResponse* response) {
   SLAPSE_AUTHORIZE(caller, "ListSessions", true);
   const bool filter = auth_ != nullptr && auth_->enabled();
-  return Reply(manager_->List(*request, filter ? &caller->tenant : nullptr), response);
+  const std::string* tenant = filter ? &caller->tenant : nullptr;
+  if (!replica_id_.empty()) context->AddInitialMetadata(api::kReplicaHeader, replica_id_);
+  if (peers_ == nullptr || MetadataValue(*context, api::kFanoutHeader) == api::kFanoutLocal) {
+    return Reply(manager_->List(*request, tenant), response);
+  }
+  return ListCluster(context, *request, tenant, response);
+}
+
+grpc::Status SlapseServiceImpl::ListCluster(grpc::ServerContext* context,
+                                            const v1::ListSessionsRequest& request,
+                                            const std::string* tenant,
+                                            v1::ListSessionsResponse* response) {
+  // A bad query fails here, before any peer is asked.
+  if (auto checked = manager_->List(request, tenant); !checked.ok()) return Error(checked.status());
+  // The peers work while this replica collects its own matching sessions.
+  auto remote = std::async(std::launch::async, [&] {
+    return peers_->Collect(request, MetadataValue(*context, "authorization"));
+  });
+  v1::ListSessionsRequest mine;
+  mine.set_filter(request.filter());
+  mine.set_state_filter(request.state_filter());
+  mine.set_page_size(api::kMaxListPageSize);
+  std::vector<v1::Session> all;
+  do {
+    auto page = manager_->List(mine, tenant);
+    if (!page.ok()) return Error(page.status());
+    for (v1::Session& s : *page->mutable_sessions()) all.push_back(std::move(s));
+    mine.set_page_token(page->next_page_token());
+  } while (!mine.page_token().empty());
+  PeerFanout::Result peers = remote.get();
+  for (v1::Session& s : peers.sessions) all.push_back(std::move(s));
+  // The cluster's creation order: create_time, then the replica; within one
+  // replica its own order (stable sort), which is its creation order also
+  // for equal timestamps. order_by keeps this order for ties.
+  std::stable_sort(all.begin(), all.end(), [](const v1::Session& a, const v1::Session& b) {
+    const auto& ta = a.create_time();
+    const auto& tb = b.create_time();
+    if (ta.seconds() != tb.seconds()) return ta.seconds() < tb.seconds();
+    if (ta.nanos() != tb.nanos()) return ta.nanos() < tb.nanos();
+    return api::SessionReplica(a.name()) < api::SessionReplica(b.name());
+  });
+  auto page = api::ApplyListQuery(std::move(all), request);
+  if (!page.ok()) return Error(page.status());
+  for (std::string& u : peers.unreachable) page->add_unreachable_peers(api::RedactText(u));
+  return Reply(std::move(page), response);
 }
 
 grpc::Status SlapseServiceImpl::DeleteSession(grpc::ServerContext* context,

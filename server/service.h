@@ -15,6 +15,7 @@
 #include <chrono>
 
 #include "server/auth.h"
+#include "server/peers.h"
 #include "server/session_manager.h"
 #include "slapse/v1/slapse.grpc.pb.h"
 
@@ -26,6 +27,15 @@ class SlapseServiceImpl final : public v1::SlapseService::Service {
   // caller in as the single tenant "".
   explicit SlapseServiceImpl(SessionManager* manager, Authenticator* auth = nullptr)
       : manager_(manager), auth_(auth) {}
+
+  // In a cluster: this replica's id (sent in ListSessions' initial
+  // metadata as api::kReplicaHeader) and its peers, which ListSessions asks
+  // too (server/peers.h); `peers` null = this server's sessions only.
+  // Call before serving; `peers` must outlive the service.
+  void SetCluster(const std::string& replica_id, const PeerFanout* peers) {
+    replica_id_ = replica_id;
+    peers_ = peers;
+  }
 
   // Makes blocked UploadStream calls fail soon (CANCELLED).
   void BeginShutdown() { shutting_down_ = true; }
@@ -58,8 +68,14 @@ class SlapseServiceImpl final : public v1::SlapseService::Service {
   // owns session `name`; a malformed or unknown name gives the manager's error.
   Status CheckOwner(const std::string& name, const Caller& caller) const;
 
+  // ListSessions over this replica and its peers (SetCluster).
+  grpc::Status ListCluster(grpc::ServerContext* context, const v1::ListSessionsRequest& request,
+                           const std::string* tenant, v1::ListSessionsResponse* response);
+
   SessionManager* manager_;
   Authenticator* auth_;
+  std::string replica_id_;
+  const PeerFanout* peers_ = nullptr;
   std::atomic<bool> shutting_down_{false};
 };
 

@@ -13,6 +13,7 @@
 #include <random>
 
 #include "api/list_query.h"
+#include "api/session_name.h"
 #include "api/validate.h"
 #include "server/ingest_source.h"
 #include "server/session_runner.h"
@@ -167,7 +168,7 @@ StatusOr<v1::Session> SessionManager::Create(const v1::Session& request) {
           " sessions active; stop or delete one, or retry later (serve --max-sessions)");
     }
     v1::Session proto = request;
-    proto.set_name(kSessionPrefix + RandomSessionId());
+    proto.set_name(api::MakeSessionName(options_.replica_id, RandomSessionId()));
     proto.clear_stats();
     proto.clear_error();
     proto.clear_ingest_url();
@@ -199,9 +200,15 @@ StatusOr<std::shared_ptr<Session>> SessionManager::Find(const std::string& name)
   bool ok = name.size() > prefix.size() && name.size() <= prefix.size() + 64 &&
             name.compare(0, prefix.size(), prefix) == 0;
   for (size_t i = prefix.size(); ok && i < name.size(); ++i) {
-    ok = (name[i] >= '0' && name[i] <= '9') || (name[i] >= 'a' && name[i] <= 'z');
+    ok = (name[i] >= '0' && name[i] <= '9') || (name[i] >= 'a' && name[i] <= 'z') || name[i] == '-';
   }
   if (!ok) return InvalidArgumentError("'" + name + "' is not a session name (sessions/{id})");
+  if (const std::string owner = api::SessionReplica(name);
+      !owner.empty() && !options_.replica_id.empty() && owner != options_.replica_id) {
+    return NotFoundError("no session '" + name + "' on this server: it belongs to replica '" +
+                         owner + "' and this is '" + options_.replica_id + "' (route the call by " +
+                         "its " + api::kReplicaHeader + " header; docs/DEPLOY.md)");
+  }
   std::lock_guard<std::mutex> lock(mu_);
   auto it = ordinals_.find(name);
   if (it == ordinals_.end()) return SessionNotFoundError(name);

@@ -66,6 +66,11 @@ struct SessionManagerOptions {
   // longer held (Pipeline::ForgetFinal): the store has them, and a session's
   // memory does not grow with its length.
   size_t final_poses_in_memory = 256;
+  // The replica this server is in a cluster (api/session_name.h): new
+  // sessions are named "sessions/<replica_id>-<random>"; a call for a
+  // session of another replica is NOT_FOUND naming both (misrouted). "" =
+  // a single server ("sessions/<random>").
+  std::string replica_id;
 };
 
 // NOT_FOUND for session `name`: "no session '<name>' on this server" (also

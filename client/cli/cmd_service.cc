@@ -188,7 +188,26 @@ int RunServe(int argc, char** argv) {
                  "stderr log: text, or json (JSON lines: time, level, session, event, message)")
       ->type_name("FORMAT")
       ->capture_default_str();
+  app.add_option("--replica-id", o.sessions.replica_id,
+                 "this server's name in a cluster (a DNS label, e.g. the StatefulSet pod "
+                 "name): session names become sessions/<ID>-<random> so a proxy routes by "
+                 "the x-slapse-replica header (docs/DEPLOY.md; default: none, one server)")
+      ->type_name("ID");
+  std::string peers;
+  app.add_option("--peers", peers,
+                 "the cluster's replicas, host:port,... (this one may be listed): "
+                 "ListSessions asks them all and names the unreachable ones; needs --replica-id")
+      ->type_name("LIST");
+  app.add_option("--peer-tls-ca", o.peer_tls_ca_file,
+                 "with TLS: CA bundle (PEM) that signed the peers' certificates (default: the "
+                 "system's roots)")
+      ->type_name("FILE");
+  app.add_option("--peer-timeout-s", o.peer_timeout_s,
+                 "how long ListSessions waits for each peer, s")
+      ->type_name("S")
+      ->capture_default_str();
   if (int rc = ParseOrExit(cl, argc, argv, 0); rc >= 0) return rc;
+  o.peers = server::SplitPeerList(peers);
   server::LogOptions log_options;
   if (std::string error; !server::ParseLogFormat(log_format, &log_options.format, &error)) {
     return Fail("serve", "--" + error, 2);
@@ -581,6 +600,13 @@ int RunList(int argc, char** argv) {
     auto page = c->ListSessions(request);
     if (!page.ok()) return Fail("list", page.status().ToString());
     for (const v1::Session& s : page->sessions()) PrintSessionLine(s);
+    // A cluster's replicas that did not answer: their sessions are missing
+    // (said once, on the first page).
+    const bool first_page = request.page_token().empty();
+    for (int i = 0; first_page && i < page->unreachable_peers_size(); ++i) {
+      std::fprintf(stderr, "list: warning: not listed, a replica did not answer: %s\n",
+                   page->unreachable_peers(i).c_str());
+    }
     request.set_page_token(page->next_page_token());
   } while (!request.page_token().empty());
   return 0;

@@ -8,6 +8,8 @@
 #include <grpcpp/create_channel.h>
 #include <grpcpp/security/credentials.h>
 
+#include "api/session_name.h"
+
 namespace slapse::client {
 
 Status FromGrpcStatus(const grpc::Status& s) {
@@ -68,8 +70,13 @@ std::unique_ptr<SlapseClient> SlapseClient::Connect(const std::string& target,
   return std::make_unique<SlapseClient>(v1::SlapseService::NewStub(channel), options);
 }
 
-void SlapseClient::PrepareContext(grpc::ClientContext* context, double timeout_s) const {
+void SlapseClient::PrepareContext(grpc::ClientContext* context, double timeout_s,
+                                  const std::string& session) const {
   if (!options_.token.empty()) context->AddMetadata("authorization", "Bearer " + options_.token);
+  // The routing header of a cluster's proxy (api/session_name.h).
+  if (const std::string replica = api::SessionReplica(session); !replica.empty()) {
+    context->AddMetadata(api::kReplicaHeader, replica);
+  }
   if (timeout_s <= 0) return;
   context->set_deadline(std::chrono::system_clock::now() +
                         std::chrono::duration_cast<std::chrono::system_clock::duration>(
@@ -87,9 +94,10 @@ StatusOr<Response> Result(const grpc::Status& s, Response response) {
 }  // namespace
 
 template <typename Request, typename Response, typename Method>
-StatusOr<Response> SlapseClient::Unary(Method method, const Request& request) {
+StatusOr<Response> SlapseClient::Unary(Method method, const Request& request,
+                                       const std::string& session) {
   grpc::ClientContext context;
-  PrepareContext(&context, options_.rpc_timeout_s);
+  PrepareContext(&context, options_.rpc_timeout_s, session);
   Response response;
   const grpc::Status s = ((*stub_).*method)(&context, request, &response);
   return Result(s, std::move(response));
@@ -106,7 +114,7 @@ StatusOr<v1::Session> SlapseClient::GetSession(const std::string& name) {
   v1::GetSessionRequest request;
   request.set_name(name);
   return Unary<v1::GetSessionRequest, v1::Session>(&v1::SlapseService::StubInterface::GetSession,
-                                                   request);
+                                                   request, name);
 }
 
 StatusOr<v1::ListSessionsResponse> SlapseClient::ListSessions(int page_size,
@@ -127,7 +135,7 @@ StatusOr<v1::ListSessionsResponse> SlapseClient::ListSessions(
 
 Status SlapseClient::DeleteSession(const std::string& name) {
   grpc::ClientContext context;
-  PrepareContext(&context, options_.rpc_timeout_s);
+  PrepareContext(&context, options_.rpc_timeout_s, name);
   v1::DeleteSessionRequest request;
   request.set_name(name);
   v1::DeleteSessionResponse response;
@@ -138,17 +146,17 @@ StatusOr<v1::Session> SlapseClient::StopSession(const std::string& name) {
   v1::StopSessionRequest request;
   request.set_name(name);
   return Unary<v1::StopSessionRequest, v1::Session>(&v1::SlapseService::StubInterface::StopSession,
-                                                    request);
+                                                    request, name);
 }
 
 StatusOr<v1::Trajectory> SlapseClient::GetTrajectoryPage(const v1::GetTrajectoryRequest& request) {
   return Unary<v1::GetTrajectoryRequest, v1::Trajectory>(
-      &v1::SlapseService::StubInterface::GetTrajectory, request);
+      &v1::SlapseService::StubInterface::GetTrajectory, request, request.name());
 }
 
 StatusOr<v1::PlaneMap> SlapseClient::GetPlaneMapPage(const v1::GetPlaneMapRequest& request) {
   return Unary<v1::GetPlaneMapRequest, v1::PlaneMap>(&v1::SlapseService::StubInterface::GetPlaneMap,
-                                                     request);
+                                                     request, request.name());
 }
 
 StatusOr<v1::Trajectory> SlapseClient::GetTrajectory(const std::string& name) {
@@ -191,7 +199,7 @@ StatusOr<v1::PlaneMap> SlapseClient::GetPlaneMap(const std::string& name) {
 StatusOr<v1::Session> SlapseClient::Upload(const std::string& name,
                                            const std::function<bool(std::string*)>& next_chunk) {
   grpc::ClientContext context;
-  PrepareContext(&context, options_.upload_timeout_s);
+  PrepareContext(&context, options_.upload_timeout_s, name);
   v1::Session response;
   std::unique_ptr<grpc::ClientWriterInterface<v1::UploadChunk>> writer =
       stub_->UploadStream(&context, &response);
@@ -238,7 +246,7 @@ StatusOr<v1::Session> SlapseClient::UploadFile(const std::string& name, const st
 Status SlapseClient::Watch(const std::string& name, uint64_t after_sequence,
                            const std::function<bool(const v1::SessionEvent&)>& on_event) {
   grpc::ClientContext context;
-  PrepareContext(&context, options_.watch_timeout_s);
+  PrepareContext(&context, options_.watch_timeout_s, name);
   v1::WatchSessionRequest request;
   request.set_name(name);
   request.set_after_sequence(after_sequence);

@@ -7,7 +7,10 @@
 //   client->Watch(session->name(), 0, [](const v1::SessionEvent& e) { ...; return true; });
 //
 // Every rpc carries a deadline (ClientOptions). Errors come back as
-// slapse::Status with the server's code and message.
+// slapse::Status with the server's code and message. Every call about one
+// session whose name carries its owner replica ("sessions/<replica>-<id>",
+// api/session_name.h) sends the header "x-slapse-replica: <replica>", by
+// which a cluster's proxy routes it to that replica (docs/DEPLOY.md).
 // Thread-safety: a SlapseClient may be used from several threads at once.
 #pragma once
 
@@ -93,11 +96,14 @@ class SlapseClient {
   // Streams chunks from `next_chunk` (fills one, returns false after the last).
   StatusOr<v1::Session> Upload(const std::string& name,
                                const std::function<bool(std::string*)>& next_chunk);
-  // The deadline (none for timeout_s <= 0) and the bearer token of an rpc.
-  void PrepareContext(grpc::ClientContext* context, double timeout_s) const;
+  // The deadline (none for timeout_s <= 0), the bearer token and, for a call
+  // about `session` whose name carries its replica, the routing header
+  // api::kReplicaHeader of an rpc.
+  void PrepareContext(grpc::ClientContext* context, double timeout_s,
+                      const std::string& session = "") const;
   // One unary rpc with the client's deadline: (stub->*method)(ctx, request, &response).
   template <typename Request, typename Response, typename Method>
-  StatusOr<Response> Unary(Method method, const Request& request);
+  StatusOr<Response> Unary(Method method, const Request& request, const std::string& session = "");
 
   std::shared_ptr<v1::SlapseService::StubInterface> stub_;
   ClientOptions options_;
