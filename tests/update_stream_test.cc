@@ -329,6 +329,20 @@ TEST_F(UpdateStreamTest, ALossIsAVisibleRestart) {
   EXPECT_EQ(restarts, 1);
   // It goes on after the restart.
   EXPECT_GT(pipeline.poses().back().pose.index, 70);
+  // ... at the speed it had: the first step after the restart carries the
+  // last step's speed (its length over its time), the drive's speed being
+  // nearly constant over the lost half second.
+  const auto& anchors = pipeline.trajectory();
+  auto speed = [&](size_t i) {
+    return (anchors[i + 1].world_from_cam.translation - anchors[i].world_from_cam.translation)
+               .norm() /
+           (anchors[i + 1].timestamp_s - anchors[i].timestamp_s);
+  };
+  size_t restart = 0;
+  while (restart < anchors.size() && anchors[restart].index <= last_posed_before) ++restart;
+  ASSERT_GE(restart, 2u);
+  ASSERT_LT(restart + 1, anchors.size());
+  EXPECT_NEAR(speed(restart) / speed(restart - 2), 1.0, 0.15);
 }
 
 }  // namespace

@@ -79,6 +79,7 @@ PipelineStep Pipeline::Process(const FrontEndStep& front) {
   const double dt_s = pair.later_timestamp_s - pair.earlier_timestamp_s;
 
   const auto t0 = std::chrono::steady_clock::now();
+  const Rigid3d world_from_cam_before = world_from_cam_;
   if (!(dt_s > 0)) {
     step.note = "anchor timestamps do not increase";
   } else if (!ekf_.initialized()) {
@@ -87,6 +88,7 @@ PipelineStep Pipeline::Process(const FrontEndStep& front) {
     Advance(observations, dt_s, &step);
   }
   step.times.ekf_ms = MsSince(t0);
+  if (step.tracking && !IsFinite(world_from_cam_)) RestartOnNonFinite(world_from_cam_before, &step);
   if (step.tracking) {
     for (const ExtractedPlane& ex : step.extracted) {
       step.extracted_filter_ids.push_back(ekf_.FilterTrackId(ex.track_id));
@@ -95,7 +97,10 @@ PipelineStep Pipeline::Process(const FrontEndStep& front) {
       const auto t1 = std::chrono::steady_clock::now();
       RefineWindow(pair, &step);
       step.times.refine_ms = MsSince(t1);
+      if (!IsFinite(world_from_cam_)) RestartOnNonFinite(world_from_cam_before, &step);
     }
+  }
+  if (step.tracking) {
     trajectory_.push_back({pair.later_index, pair.later_timestamp_s, world_from_cam_});
     if (first_pose_s_ < 0) first_pose_s_ = pair.earlier_timestamp_s;
     RecordPlanes(step, pair);
@@ -134,11 +139,18 @@ PipelineStep Pipeline::Process(const FrontEndStep& front) {
 
 double Pipeline::InitialStepLength(double dt_s) {
   const ScaleOptions& sc = options_.scale;
-  double length = 1.0;  // up to scale, or the last step's length on re-initialisation
+  double length = 1.0;  // up to scale
   if (trajectory_.size() >= 2) {
-    const auto& a = trajectory_[trajectory_.size() - 2].world_from_cam.translation;
-    const auto& b = trajectory_.back().world_from_cam.translation;
-    length = std::max((b - a).norm(), 1e-6);
+    // Re-initialisation: the last step's speed over this pair's time, so the
+    // scale carries over whatever the two pairs' spans (an IBBBP GOP's last
+    // pair may span 3 frames and the next 4: its length alone would shrink
+    // the scale by 3/4 at every restart).
+    const TimedPose& a = trajectory_[trajectory_.size() - 2];
+    const TimedPose& b = trajectory_.back();
+    const double last_dt_s = b.timestamp_s - a.timestamp_s;
+    const double last_length = (b.world_from_cam.translation - a.world_from_cam.translation).norm();
+    length = last_dt_s > 0 ? last_length / last_dt_s * dt_s : last_length;
+    length = std::max(length, 1e-6);
   } else if (sc.source == ScaleOptions::Source::kFirstStep) {
     length = sc.first_step_m;
     metric_ = true;
@@ -185,7 +197,7 @@ void Pipeline::Advance(const std::vector<PlaneObservation>& observations, double
   if (s.ok()) s = ekf_.Update(observations, &step->ekf);
   if (!s.ok()) {
     // Numerical failure: restart the filter on a later pair; the trajectory
-    // continues from the last pose with the last step's length as scale.
+    // continues from the last pose at the last step's speed (InitialStepLength).
     step->note = "filter reset: " + s.ToString();
     ekf_ = PlaneEkf(intrinsics_, options_.ekf);
     refiner_.Reset();
@@ -391,6 +403,19 @@ Status Pipeline::RevisePose(size_t n, const Rigid3d& world_from_cam) {
     if (anchor + 1 == trajectory_.end()) world_from_cam_ = world_from_cam;
   }
   return Status::Ok();
+}
+
+bool Pipeline::IsFinite(const Rigid3d& pose) {
+  return pose.translation.allFinite() && pose.rotation.coeffs().allFinite();
+}
+
+void Pipeline::RestartOnNonFinite(const Rigid3d& world_from_cam_before, PipelineStep* step) {
+  world_from_cam_ = world_from_cam_before;
+  step->tracking = false;
+  step->extracted_filter_ids.clear();
+  step->note = "filter reset: the motion estimate was not finite";
+  ekf_ = PlaneEkf(intrinsics_, options_.ekf);
+  refiner_.Reset();
 }
 
 bool Pipeline::ScaleMayChange() const {

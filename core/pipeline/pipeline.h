@@ -149,7 +149,7 @@ class Pipeline {
   // pushed next do not connect to those before. Drops the open GOP segment,
   // the remembered planes and the filter; the trajectory, plane map and scale
   // stay. The filter re-initialises on the next usable pair from the last
-  // pose, with the last step's length as scale (as after a filter reset).
+  // pose, at the last step's speed as scale (as after a filter reset).
   // Later frames still need larger indices and timestamps.
   void Break();
 
@@ -200,9 +200,15 @@ class Pipeline {
                   double dt_s, PipelineStep* step);
   // Predicts and updates the running filter (a numerical failure resets it).
   void Advance(const std::vector<PlaneObservation>& observations, double dt_s, PipelineStep* step);
-  // The first step's length when the filter starts: the last step's on
-  // re-initialisation, else from the scale source (may set metric_).
+  // The first step's length when the filter starts: on re-initialisation the
+  // last step's speed times dt_s, else from the scale source (may set metric_).
   double InitialStepLength(double dt_s);
+  static bool IsFinite(const Rigid3d& pose);
+  // A step whose pose came out non-finite (a numerical failure the filter or
+  // refiner did not report) does not track: the pose goes back to
+  // `world_from_cam_before` and the filter restarts on a later pair, as
+  // after a reported failure -- never a NaN pose passed on as tracked.
+  void RestartOnNonFinite(const Rigid3d& world_from_cam_before, PipelineStep* step);
   void RecordPlanes(const PipelineStep& step, const AnchorPair& pair);
   void ApplyScale(double s);
   void MaybeFixScaleFromRoad();
