@@ -186,6 +186,7 @@ StatusOr<v1::Session> SessionManager::Create(const v1::Session& request) {
     proto.clear_stats();
     proto.clear_error();
     proto.clear_ingest_url();
+    proto.clear_publish_credentials();  // output only; never stored
     proto.clear_stream_report();
     if (request.has_rtsp_push()) {
       if (rtsp_ == nullptr) return UnavailableError("the RTSP ingest port is not open");

@@ -1,6 +1,7 @@
 // RTSP push ingest on the server's one RTSP port (server/rtsp_ingest.h,
-// gst-rtsp-server): real ffmpeg publishers (ANNOUNCE / RECORD over TCP) and
-// raw RTSP requests against a real server on loopback.
+// gst-rtsp-server): real publishers (ffmpeg, and GStreamer's rtspclientsink
+// through tests/rtsp_publish.py; ANNOUNCE / RECORD over TCP) and raw RTSP
+// requests against a real server on loopback.
 //   - two sessions publish on the same port at once, each to its own path,
 //     and each equals the offline run of its own drive;
 //   - no or wrong credentials: 401 (another session's: refused too), the
@@ -9,6 +10,7 @@
 //   - TEARDOWN ends FINISHED, a killed publisher FAILED (UNAVAILABLE, "lost").
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <memory>
@@ -142,7 +144,11 @@ class RtspPushTest : public ::testing::Test {
     return got;
   }
 
-  void ExpectEqualsOffline(const std::string& name, const Offline& offline) {
+  // `time_tol_s` / `pose_tol` (relative to max(1, |value|)): 1e-9 when the
+  // publisher sends the file's own 90 kHz timestamps (ffmpeg -c copy);
+  // looser for one that re-stamps them.
+  void ExpectEqualsOffline(const std::string& name, const Offline& offline,
+                           double time_tol_s = 1e-9, double pose_tol = 1e-9) {
     auto session = client_->GetSession(name);
     auto trajectory = client_->GetTrajectory(name);
     ASSERT_TRUE(session.ok()) << session.status().ToString();
@@ -151,20 +157,26 @@ class RtspPushTest : public ::testing::Test {
     ASSERT_EQ(trajectory->points_size(), static_cast<int>(offline.trajectory.size()));
     // The same coded frames with the same 90 kHz timestamps (RTP's, kept
     // exactly through MPEG-TS) give the same vectors, so the same poses.
-    constexpr double kTol = 1e-9;
     for (size_t i = 0; i < offline.trajectory.size(); ++i) {
       const TimedPose& o = offline.trajectory[i];
       const v1::Trajectory::Point& s = trajectory->points(static_cast<int>(i));
       SCOPED_TRACE("pose " + std::to_string(i));
       EXPECT_EQ(s.anchor_index(), o.index);
-      EXPECT_NEAR(s.timestamp_s(), o.timestamp_s, kTol);
-      EXPECT_NEAR(s.world_from_cam().tx(), o.world_from_cam.translation.x(), kTol);
-      EXPECT_NEAR(s.world_from_cam().ty(), o.world_from_cam.translation.y(), kTol);
-      EXPECT_NEAR(s.world_from_cam().tz(), o.world_from_cam.translation.z(), kTol);
-      EXPECT_NEAR(s.world_from_cam().qx(), o.world_from_cam.rotation.x(), kTol);
-      EXPECT_NEAR(s.world_from_cam().qy(), o.world_from_cam.rotation.y(), kTol);
-      EXPECT_NEAR(s.world_from_cam().qz(), o.world_from_cam.rotation.z(), kTol);
-      EXPECT_NEAR(s.world_from_cam().qw(), o.world_from_cam.rotation.w(), kTol);
+      EXPECT_NEAR(s.timestamp_s(), o.timestamp_s, time_tol_s);
+      EXPECT_NEAR(s.world_from_cam().tx(), o.world_from_cam.translation.x(),
+                  pose_tol * std::max(1.0, std::abs(o.world_from_cam.translation.x())));
+      EXPECT_NEAR(s.world_from_cam().ty(), o.world_from_cam.translation.y(),
+                  pose_tol * std::max(1.0, std::abs(o.world_from_cam.translation.y())));
+      EXPECT_NEAR(s.world_from_cam().tz(), o.world_from_cam.translation.z(),
+                  pose_tol * std::max(1.0, std::abs(o.world_from_cam.translation.z())));
+      EXPECT_NEAR(s.world_from_cam().qx(), o.world_from_cam.rotation.x(),
+                  pose_tol * std::max(1.0, std::abs(o.world_from_cam.rotation.x())));
+      EXPECT_NEAR(s.world_from_cam().qy(), o.world_from_cam.rotation.y(),
+                  pose_tol * std::max(1.0, std::abs(o.world_from_cam.rotation.y())));
+      EXPECT_NEAR(s.world_from_cam().qz(), o.world_from_cam.rotation.z(),
+                  pose_tol * std::max(1.0, std::abs(o.world_from_cam.rotation.z())));
+      EXPECT_NEAR(s.world_from_cam().qw(), o.world_from_cam.rotation.w(),
+                  pose_tol * std::max(1.0, std::abs(o.world_from_cam.rotation.w())));
     }
   }
 
@@ -193,6 +205,16 @@ TEST_F(RtspPushTest, TwoPublishersOnOnePortEachEqualTheirOfflineRun) {
   auto got = client_->GetSession(a.name());
   ASSERT_TRUE(got.ok());
   EXPECT_FALSE(got->has_publish_credentials());
+  // Output only: credentials a client puts in its request are dropped.
+  v1::Session planted;
+  planted.mutable_rtsp_push()->set_path("planted");
+  planted.mutable_publish_credentials()->set_password("planted-by-the-client");
+  *planted.mutable_intrinsics() = api::IntrinsicsToProto(drives_[0].intrinsics);
+  auto with_planted = client_->CreateSession(planted);
+  ASSERT_TRUE(with_planted.ok()) << with_planted.status().ToString();
+  EXPECT_NE(with_planted->publish_credentials().password(), "planted-by-the-client");
+  EXPECT_FALSE(client_->GetSession(with_planted->name())->has_publish_credentials());
+  ASSERT_TRUE(client_->DeleteSession(with_planted->name()).ok());
   auto listed = client_->ListSessions(v1::ListSessionsRequest());
   ASSERT_TRUE(listed.ok());
   for (const v1::Session& s : listed->sessions()) EXPECT_FALSE(s.has_publish_credentials());
@@ -219,6 +241,24 @@ TEST_F(RtspPushTest, TwoPublishersOnOnePortEachEqualTheirOfflineRun) {
   }
   // Ended: the path is unmounted.
   EXPECT_EQ(RtspRequestStatus(rtsp_port_, "ANNOUNCE", a.ingest_url(), kSdp), 404);
+}
+
+// GStreamer's rtspclientsink as the camera (Digest auth, RTP over TCP,
+// TEARDOWN at the end): the same result as ffmpeg's.
+TEST_F(RtspPushTest, AGStreamerPublisherEqualsTheOfflineRunToo) {
+  const v1::Session a = Create("gst", 1);
+  ASSERT_FALSE(a.name().empty());
+  const int rc = testing::RunCommand(std::string(SLAPSE_RTSP_PUBLISH_PY) + " " +
+                                     drives_[1].video_path + " '" + PublishUrl(a) + "'");
+  EXPECT_EQ(rc, 0);
+  const v1::StateChange end = WatchToEnd(a.name());
+  EXPECT_EQ(end.state(), v1::Session::FINISHED) << end.message();
+  EXPECT_NE(end.message().find("TEARDOWN"), std::string::npos) << end.message();
+  // rtspclientsink re-stamps: its RTP timestamps are the file's truncated to
+  // ns and back, some a 90 kHz tick (11 us) early, so dt is off by up to
+  // 11 us in 33 ms (3e-4) on those frames: the same frames and anchors, times
+  // within a tick, poses within 1e-3 relative (1e-4 seen).
+  ExpectEqualsOffline(a.name(), offline_[1], 1.2e-5, 1e-3);
 }
 
 TEST_F(RtspPushTest, WrongCredentialsAre401AndTheSessionIsUntouched) {
