@@ -374,14 +374,17 @@ RtspIngest::~RtspIngest() {
   }
   for (const std::string& name : own) UnmountOwn(name);
   Impl* im = impl_.get();
-  // Every remaining connection (failed publishers, idle clients) closes.
-  RunInLoop(im->context, [im] {
-    gst_rtsp_server_client_filter(
-        im->server, [](GstRTSPServer*, GstRTSPClient*, gpointer) { return GST_RTSP_FILTER_REMOVE; },
-        nullptr);
-  });
-  g_main_loop_quit(im->loop);
-  im->thread.join();
+  if (im->thread.joinable()) {  // else Start failed before the loop ran
+    // Every remaining connection (failed publishers, idle clients) closes.
+    RunInLoop(im->context, [im] {
+      gst_rtsp_server_client_filter(
+          im->server,
+          [](GstRTSPServer*, GstRTSPClient*, gpointer) { return GST_RTSP_FILTER_REMOVE; },
+          nullptr);
+    });
+    g_main_loop_quit(im->loop);
+    im->thread.join();
+  }
   {
     std::lock_guard<std::mutex> lock(im->mu);
     for (auto& [name, e] : im->by_session) Impl::ReleasePublisher(&e);

@@ -345,6 +345,18 @@ TEST_F(RtspPushTest, NoPublisherIsDeadlineExceeded) {
             static_cast<int>(StatusCode::kDeadlineExceeded));
 }
 
+// The RTSP port taken: the server does not start, and says which flag moves it.
+TEST_F(RtspPushTest, ATakenRtspPortIsUnavailable) {
+  server::ServerOptions o;
+  o.port = 0;
+  o.sessions.rtsp_port = rtsp_port_;  // this fixture's server has it
+  auto second = SlapseServer::Start(o);
+  ASSERT_FALSE(second.ok());
+  EXPECT_EQ(second.status().code(), StatusCode::kUnavailable);
+  EXPECT_NE(second.status().message().find("--rtsp-port"), std::string::npos)
+      << second.status().message();
+}
+
 // The credentials derive from the data directory's key: the same after a
 // restart, different for another key.
 TEST(RtspIngestKeyTest, TheKeyFilePersistsAndInMemoryKeysDiffer) {
