@@ -379,8 +379,7 @@ RtspIngest::~RtspIngest() {
     RunInLoop(im->context, [im] {
       gst_rtsp_server_client_filter(
           im->server,
-          [](GstRTSPServer*, GstRTSPClient*, gpointer) { return GST_RTSP_FILTER_REMOVE; },
-          nullptr);
+          [](GstRTSPServer*, GstRTSPClient*, gpointer) { return GST_RTSP_FILTER_REMOVE; }, nullptr);
     });
     g_main_loop_quit(im->loop);
     im->thread.join();
@@ -514,7 +513,7 @@ StatusOr<std::string> LoadOrCreateRtspIngestKey(const std::string& data_dir) {
 
 std::string RtspPublishUrl(const std::string& ingest_url, const RtspPublishCredentials& c) {
   const std::string scheme = "rtsp://";
-  if (ingest_url.compare(0, scheme.size(), scheme) != 0) return ingest_url;
+  if (c.username.empty() || ingest_url.compare(0, scheme.size(), scheme) != 0) return ingest_url;
   return scheme + c.username + ":" + c.password + "@" + ingest_url.substr(scheme.size());
 }
 

@@ -122,7 +122,8 @@ StatusOr<std::string> LoadOrCreateRtspIngestKey(const std::string& data_dir);
 
 // "rtsp://HOST:PORT/PATH" with `credentials` put in as user:password@, for
 // publishers that take credentials in the URL (ffmpeg, rtspclientsink). The
-// user and password are URL-safe ([a-z0-9-]).
+// user and password are URL-safe ([a-z0-9-]). Without credentials (e.g. an
+// older server's response) the URL as it is.
 std::string RtspPublishUrl(const std::string& ingest_url, const RtspPublishCredentials& c);
 
 }  // namespace slapse::server
