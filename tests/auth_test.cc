@@ -528,7 +528,7 @@ bool ListensOnLoopbackOnly(int port) {
 TEST(BindTest, TheCliServesLoopbackByDefaultAndRefusesAnUnprotectedPublicAddress) {
   const std::string dir = testing::MakeTempDir("auth_bind");
   {
-    ServeProcess serve(dir, {});
+    ServeProcess serve(dir, {"--data-dir", dir + "/data"});  // not the shared default
     const std::string address = serve.Address();
     ASSERT_EQ(address.rfind("127.0.0.1:", 0), 0u) << serve.Stdout() << serve.Stderr();
     const int port = std::stoi(address.substr(10));
@@ -569,7 +569,9 @@ TEST(SecretsTest, APlantedSecretAppearsInNoOutput) {
   const std::string kWrongBearer = "planted-wrong-bearer-4711";
   const std::string dir = testing::MakeTempDir("auth_secrets");
   testing::WriteFileBytes(dir + "/tokens.json", TokensJson({{kBearer, "acme"}}));
-  ServeProcess serve(dir, {"--tokens-file", dir + "/tokens.json"});
+  // A data directory of its own: the default one is locked by whichever test's
+  // server started first when ctest runs them side by side.
+  ServeProcess serve(dir, {"--tokens-file", dir + "/tokens.json", "--data-dir", dir + "/data"});
   const std::string address = serve.Address();
   ASSERT_FALSE(address.empty()) << serve.Stderr();
 
