@@ -35,8 +35,14 @@ RUN find / -xdev \( -type f -o -type l \) -path '*/lib*' | sed 's#^/lib/#/usr/li
 COPY deploy/install-deps.sh /tmp/install-deps.sh
 RUN bash /tmp/install-deps.sh --runtime && rm -rf /var/lib/apt/lists/*
 COPY --from=build /slapse /usr/local/bin/slapse
-RUN set -e; mkdir /closure; \
-    for lib in $(ldd /usr/local/bin/slapse | awk '/=> \// {print $3}' | sort -u); do \
+# The RTSP push ingest's GStreamer plugins (dlopen'ed, so not in slapse's ldd; the
+# record pipeline of server/rtsp_ingest.cc) and the plugin scanner come along by name,
+# with their own ldd closures.
+RUN set -e; mkdir /closure; gst="$(ls -d /usr/lib/*/gstreamer-1.0)"; \
+    extra="$(ls /usr/lib/*/gstreamer1.0/gstreamer-1.0/gst-plugin-scanner)"; \
+    for p in coreelements playback typefindfunctions app rtp rtpmanager udp mpegtsmux \
+             videoparsersbad; do extra="$extra $gst/libgst$p.so"; done; \
+    for lib in $extra $(ldd /usr/local/bin/slapse $extra | awk '/=> \// {print $3}' | sort -u); do \
       dest="$(readlink -f "$(dirname "$lib")")/$(basename "$lib")"; \
       grep -qxF "$dest" /tmp/base-files && continue; \
       mkdir -p "/closure$(dirname "$dest")"; cp -L "$lib" "/closure$dest"; \
@@ -53,7 +59,8 @@ RUN ldconfig && ! ldd /usr/local/bin/slapse | grep "not found" \
 USER slapse
 WORKDIR /var/lib/slapse
 VOLUME /var/lib/slapse
-EXPOSE 50051 8080
+# gRPC, HTTP (/metrics, dashboard), RTSP ingest of every push session (docs/DEPLOY.md)
+EXPOSE 50051 8080 8554
 # Healthy = the gRPC health service answers SERVING for slapse.v1.SlapseService.
 HEALTHCHECK --interval=10s --timeout=3s --start-period=5s --retries=3 \
   CMD ["slapse", "health", "--server", "127.0.0.1:50051", "--service", "slapse.v1.SlapseService"]
@@ -63,4 +70,4 @@ ENTRYPOINT ["slapse"]
 # certificates and a tokens file and replace --insecure with --tls-cert/--tls-key/
 # --tokens-file (README "Secure setup").
 CMD ["serve", "--address", "0.0.0.0", "--insecure", "--port", "50051", "--http-port", "8080", \
-     "--data-dir", "/var/lib/slapse"]
+     "--rtsp-port", "8554", "--data-dir", "/var/lib/slapse"]

@@ -138,7 +138,10 @@ int RunChild(int n, const std::string& video, const slapse::Intrinsics& k, doubl
       return 1;
     }
     out[i].name = s->name();
-    urls[i] = s->ingest_url();
+    // The publish URL: the session's credentials put in (shown at creation only).
+    urls[i] = slapse::server::RtspPublishUrl(
+        s->ingest_url(),
+        {s->publish_credentials().username(), s->publish_credentials().password()});
   }
   std::vector<std::thread> watchers;
   std::mutex mu;

@@ -44,6 +44,9 @@ BUILD_PACKAGES=(
   # service: the HTTP server for /metrics (server/http_server.cc) and the Prometheus
   # metric registry and text format (server/metrics.cc)
   libcpp-httplib-dev prometheus-cpp-dev
+  # service: RTSP push ingest on one port (server/rtsp_ingest.cc): gst-rtsp-server in
+  # RECORD mode, its record pipeline's appsink (libgstreamer-plugins-base1.0-dev)
+  libgstrtspserver-1.0-dev libgstreamer-plugins-base1.0-dev
 )
 TEST_PACKAGES=(
   # tests
@@ -55,6 +58,8 @@ TEST_PACKAGES=(
   # tsdemux + mpegvideoparse are in plugins-bad, rtpmpvpay in plugins-good.
   python3-gi gir1.2-gst-rtsp-server-1.0
   gstreamer1.0-plugins-base gstreamer1.0-plugins-good gstreamer1.0-plugins-bad
+  # tests: GStreamer's RTSP publisher (rtspclientsink) as a camera, besides ffmpeg
+  gstreamer1.0-rtsp
   # fuzzing (fuzz/, docs/FUZZING.md): clang with libFuzzer + ASan/UBSan runtimes,
   # llvm-symbolizer for readable stacks
   clang-14 libclang-rt-14-dev llvm-14
@@ -79,6 +84,12 @@ RUNTIME_PACKAGES=(
   libgrpc++1.51 libgrpc29 libprotobuf32
   libcpp-httplib0.11 libprometheus-cpp-core1.0
   libsqlite3-0 libssl3 libceres3
+  # RTSP push ingest: gst-rtsp-server and GStreamer (ldd), and the plugins its record
+  # pipeline loads (dlopen, so the Dockerfile copies them by name): parsebin, appsink,
+  # typefind (base), RTP depayloaders, rtpbin, udp (good), mpegtsmux and the video
+  # parsers (bad)
+  libgstrtspserver-1.0-0 libgstreamer1.0-0 libgstreamer-plugins-base1.0-0
+  gstreamer1.0-plugins-base gstreamer1.0-plugins-good gstreamer1.0-plugins-bad
 )
 case "$MODE" in
   all) PACKAGES=("${BUILD_PACKAGES[@]}" "${TEST_PACKAGES[@]}") ;;

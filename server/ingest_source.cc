@@ -18,7 +18,7 @@ std::unique_ptr<IngestSource> IngestSource::Make(const v1::Session& request,
       source = MakeRtspPullSource(request.rtsp_pull());
       break;
     case v1::Session::kRtspPush:
-      source = MakeRtspPushSource(request.rtsp_push(), request.ingest_url());
+      source = MakeRtspPushSource(request.name(), request.rtsp_push());
       break;
     case v1::Session::kRtpSdp:
       source = MakeRtpSdpSource(request.rtp_sdp());

@@ -3,8 +3,8 @@
 //   source_upload.cc     the client's UploadStream bytes (no deadlines)
 //   source_rtsp_pull.cc  an RTSP server the session connects to, reconnecting
 //                        on an outage by its ReconnectPolicy
-//   source_rtsp_push.cc  an RTSP publisher that connects to the session's own
-//                        listener (ingest_url)
+//   source_rtsp_push.cc  an RTSP publisher on the server's one RTSP ingest port
+//                        (server/rtsp_ingest.h), at the session's ingest_url
 //   source_rtp_sdp.cc    RTP packets described by an SDP
 // A source knows how to open its reader (one connection), its deadlines and
 // how a connection's end reads: it ends the session (Session::End /
@@ -93,17 +93,14 @@ class SingleConnectionSource : public IngestSource {
 // The sources (one file each).
 std::unique_ptr<IngestSource> MakeUploadSource(std::shared_ptr<UploadQueue> upload);
 std::unique_ptr<IngestSource> MakeRtspPullSource(const v1::RtspPull& pull);
-std::unique_ptr<IngestSource> MakeRtspPushSource(const v1::RtspPush& push,
-                                                 const std::string& ingest_url);
+// RTSP push: the mount of session `session_name` (RtspIngest::Mount).
+std::unique_ptr<IngestSource> MakeRtspPushSource(const std::string& session_name,
+                                                 const v1::RtspPush& push);
 std::unique_ptr<IngestSource> MakeRtpSdpSource(const v1::RtpSdp& rtp);
 
 // RTP/SDP: FAILED_PRECONDITION naming the port if the UDP port of the SDP's
 // m=video line (RTP) or the next one (RTCP) cannot be bound here (in use).
 // At CreateSession and again when the session opens its receiver.
 Status CheckRtpPortsFree(const std::string& sdp);
-
-// RTSP push: the ingest_url of a new session's listener on `host` (a free
-// port of its own) for `path`. UNAVAILABLE if no port is free.
-StatusOr<std::string> RtspPushIngestUrl(const std::string& host, const std::string& path);
 
 }  // namespace slapse::server

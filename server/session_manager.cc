@@ -70,6 +70,16 @@ Status SessionManager::Open() {
   auto store = Store::Open(options_.data_dir);
   if (!store.ok()) return store.status();
   store_ = std::move(*store);
+  auto key = LoadOrCreateRtspIngestKey(options_.data_dir);
+  if (!key.ok()) return key.status();
+  RtspIngestOptions rtsp;
+  rtsp.host = options_.rtsp_push_host;
+  rtsp.port = options_.rtsp_port;
+  rtsp.key = std::move(*key);
+  rtsp.buffer_bytes = options_.upload_buffer_bytes;
+  auto ingest = RtspIngest::Start(rtsp);
+  if (!ingest.ok()) return ingest.status();
+  rtsp_ = std::move(*ingest);
   auto stored = store_->LoadSessions();
   if (!stored.ok()) return stored.status();
   for (StoredSession& s : *stored) Restore(std::move(s));
@@ -99,6 +109,11 @@ void SessionManager::Restore(StoredSession stored) {
                              " frames were processed; their results are kept); upload the "
                              "stream again to a new session"));
     return;
+  }
+  if (s->proto.has_rtsp_push()) {
+    // Mounted again on this run's RTSP port (the same credentials).
+    auto url = rtsp_->Mount(s->name, s->proto.rtsp_push().path());
+    if (url.ok()) s->proto.set_ingest_url(*url);
   }
   if (!s->proto.has_upload()) {
     s->segment = stored.max_segment + 1;
@@ -172,9 +187,11 @@ StatusOr<v1::Session> SessionManager::Create(const v1::Session& request) {
     proto.clear_stats();
     proto.clear_error();
     proto.clear_ingest_url();
+    proto.clear_publish_credentials();  // output only; never stored
     proto.clear_stream_report();
     if (request.has_rtsp_push()) {
-      auto url = RtspPushIngestUrl(options_.rtsp_push_host, request.rtsp_push().path());
+      if (rtsp_ == nullptr) return UnavailableError("the RTSP ingest port is not open");
+      auto url = rtsp_->Mount(proto.name(), request.rtsp_push().path());
       if (!url.ok()) return url.status();
       proto.set_ingest_url(*url);
     }
@@ -182,7 +199,10 @@ StatusOr<v1::Session> SessionManager::Create(const v1::Session& request) {
     *proto.mutable_create_time() = TimeUtil::GetCurrentTime();
     *proto.mutable_update_time() = proto.create_time();
     auto ordinal = store_->AddSession(proto);
-    if (!ordinal.ok()) return ordinal.status();
+    if (!ordinal.ok()) {
+      if (request.has_rtsp_push()) RtspIngest::Unmount(proto.name());
+      return ordinal.status();
+    }
     s = std::make_shared<Session>(proto.name(), options_.event_ring_capacity, QueueOptions(),
                                   store_, *ordinal);
     s->proto = std::move(proto);
@@ -192,8 +212,17 @@ StatusOr<v1::Session> SessionManager::Create(const v1::Session& request) {
     // Queued under mu_, so a Shutdown after this still runs (and ends) it.
     pool_.Submit([s, keep = options_.final_poses_in_memory] { SessionRunner(s, keep).Run(); });
   }
-  return s->Snapshot();
+  v1::Session created = s->Snapshot();
+  // The publish credentials: in this response only, never stored.
+  if (request.has_rtsp_push()) {
+    const RtspPublishCredentials c = rtsp_->Credentials(created.name());
+    created.mutable_publish_credentials()->set_username(c.username);
+    created.mutable_publish_credentials()->set_password(c.password);
+  }
+  return created;
 }
+
+int SessionManager::rtsp_port() const { return rtsp_ == nullptr ? 0 : rtsp_->port(); }
 
 StatusOr<std::shared_ptr<Session>> SessionManager::Find(const std::string& name) const {
   const std::string prefix = kSessionPrefix;

@@ -29,6 +29,7 @@
 
 #include "core/common/status.h"
 #include "server/event_log.h"
+#include "server/rtsp_ingest.h"
 #include "server/session.h"
 #include "server/store.h"
 #include "server/worker_pool.h"
@@ -51,9 +52,12 @@ struct SessionManagerOptions {
   int64_t upload_stall_timeout_ms = 60 * 1000;
   // Events kept per session for watchers to resume from.
   size_t event_ring_capacity = 4096;
-  // RTSP push: the address each session's RTSP listener binds (on a free
-  // ephemeral port of its own) and that its ingest_url names.
+  // RTSP push: the address the server's one RTSP ingest port binds and that
+  // ingest URLs name (server/rtsp_ingest.h).
   std::string rtsp_push_host = "127.0.0.1";
+  // The RTSP ingest port of every push session; 0 = a free one
+  // (SessionManager::rtsp_port()). `slapse serve` uses 8554.
+  int rtsp_port = 0;
   // Where sessions and results persist (server/store.h); kInMemoryDataDir
   // keeps them in memory only (the library's default, for tests and
   // embedding; `slapse serve` defaults to DefaultDataDir()).
@@ -85,9 +89,12 @@ class SessionManager {
   SessionManager(const SessionManager&) = delete;
   SessionManager& operator=(const SessionManager&) = delete;
 
-  // Opens the store and restores its sessions (above). Call once before
-  // serving; FAILED_PRECONDITION if the data directory is unusable.
+  // Opens the store, starts the RTSP ingest port and restores the sessions
+  // (above). Call once before serving; FAILED_PRECONDITION if the data
+  // directory is unusable, UNAVAILABLE if the RTSP port cannot be bound.
   Status Open();
+  // The RTSP ingest port (after Open), 0 if not started.
+  int rtsp_port() const;
 
   // Validates and starts a session from `request` (source, intrinsics,
   // pipeline options). INVALID_ARGUMENT (also a bad RTSP pull URL or
@@ -142,7 +149,8 @@ class SessionManager {
   bool shutting_down_ = false;
   std::condition_variable retention_cv_;  // with mu_: wakes the loop at Shutdown
   std::thread retention_;
-  WorkerPool pool_;  // one thread per active session; last, so it stops first
+  std::unique_ptr<RtspIngest> rtsp_;  // RTSP push mounts; outlives the workers
+  WorkerPool pool_;                   // one thread per active session; last, so it stops first
 };
 
 }  // namespace slapse::server

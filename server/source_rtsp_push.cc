@@ -1,38 +1,70 @@
-// The RTSP push source: the session listens (FFmpeg's RTSP demuxer in listen
-// mode) on its own port of `rtsp_push_host`, named by its ingest_url, for one
-// publisher (ANNOUNCE / SETUP / RECORD, then RTP over TCP or UDP). The
-// session FINISHES when the publisher ends the stream and FAILS when no
-// publisher came within start_timeout_ms or it went quiet for
-// receive_timeout_ms.
-#include <arpa/inet.h>
-#include <netinet/in.h>
-#include <sys/socket.h>
-#include <unistd.h>
-
+// The RTSP push source: the session's mount on the server's one RTSP ingest
+// port (server/rtsp_ingest.h, gst-rtsp-server), named by its ingest_url, for
+// one authenticated publisher (ANNOUNCE / SETUP / RECORD, then RTP over TCP
+// or UDP). The mount's MPEG-TS bytes are read as an upload's are. The session
+// FINISHES when the publisher sends TEARDOWN; it FAILS with UNAVAILABLE when
+// the publisher's connection is lost without one or it goes quiet for
+// receive_timeout_ms, and with DEADLINE_EXCEEDED when no publisher came
+// within start_timeout_ms. The session's end unmounts it.
 #include "server/ingest_source.h"
+#include "server/rtsp_ingest.h"
 
 namespace slapse::server {
 namespace {
 
+// The mount's bytes; `interrupt` (the runner's deadlines and stop) ends a
+// wait for them.
+class MountByteSource : public ByteSource {
+ public:
+  MountByteSource(std::shared_ptr<UploadQueue> bytes, std::function<bool()> interrupt)
+      : bytes_(std::move(bytes)), interrupt_(std::move(interrupt)) {}
+  int Read(uint8_t* buf, int size) override { return bytes_->Read(buf, size, interrupt_); }
+
+ private:
+  std::shared_ptr<UploadQueue> bytes_;
+  std::function<bool()> interrupt_;
+};
+
 class RtspPushSource : public SingleConnectionSource {
  public:
-  RtspPushSource(const v1::RtspPush& push, std::string ingest_url)
+  RtspPushSource(const std::string& session_name, const v1::RtspPush& push)
       : SingleConnectionSource(push.start_timeout_ms(), push.receive_timeout_ms()),
-        ingest_url_(std::move(ingest_url)) {}
+        session_name_(session_name),
+        mount_(RtspIngest::FindMount(session_name)) {}
+  ~RtspPushSource() override { RtspIngest::Unmount(session_name_); }
 
   StatusOr<std::unique_ptr<MvReader>> Open(std::function<bool()> interrupt) override {
-    // "timeout" is FFmpeg's socket I/O timeout in microseconds.
-    MvReaderOptions o = ReaderOptions(std::move(interrupt));
-    o.format = "rtsp";
-    o.format_options = {{"rtsp_flags", "listen"},
-                        {"timeout", std::to_string(int64_t{receive_timeout_ms()} * 1000)}};
-    return MvReader::Open(ingest_url_, o);
+    if (mount_ == nullptr) {
+      return UnavailableError(
+          "the session has no RTSP ingest mount (is the server's RTSP "
+          "ingest running? serve --rtsp-port)");
+    }
+    MvReaderOptions o = ReaderOptions(interrupt);
+    o.format = "mpegts";
+    return MvReader::Open(std::make_unique<MountByteSource>(mount_->bytes(), interrupt), o);
   }
 
-  // FFmpeg's RTSP listener reports a TEARDOWN and a closed connection alike
-  // (end of file), so both finish the session.
   std::string EndOfStreamMessage() const override {
-    return "the publisher ended the stream (TEARDOWN or closed connection)";
+    return "the publisher ended the stream (TEARDOWN)";
+  }
+
+  // The mount goes first, so the path answers 404 before the session's end
+  // is announced.
+  std::optional<int> AfterConnection(Session* session, const ConnectionEnd& end) override {
+    RtspIngest::Unmount(session_name_);
+    if (end.timed_out) {
+      session->End(TimedOut(end.session_frames));
+      return std::nullopt;
+    }
+    if (mount_ != nullptr && mount_->end() == RtspPublishMount::End::kLost) {
+      session->End({v1::Session::FAILED,
+                    UnavailableError("the RTSP publisher's connection was lost without a "
+                                     "TEARDOWN (camera gone or network cut) after " +
+                                     std::to_string(end.session_frames) + " frames"),
+                    ""});
+      return std::nullopt;
+    }
+    return SingleConnectionSource::AfterConnection(session, end);
   }
 
  protected:
@@ -51,39 +83,15 @@ class RtspPushSource : public SingleConnectionSource {
   }
 
  private:
-  const std::string ingest_url_;
+  const std::string session_name_;
+  const std::shared_ptr<RtspPublishMount> mount_;
 };
-
-// A free TCP port on `host`, from the kernel's ephemeral range. The port is
-// released before FFmpeg binds it again; the kernel does not hand it out again
-// right away, so the gap is harmless in practice.
-StatusOr<int> PickFreeTcpPort(const std::string& host) {
-  sockaddr_in sa{};
-  sa.sin_family = AF_INET;
-  if (inet_pton(AF_INET, host.c_str(), &sa.sin_addr) != 1) {
-    return UnavailableError("rtsp_push_host '" + host + "' is not an IPv4 address");
-  }
-  const int fd = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
-  if (fd < 0) return UnavailableError("no socket for an RTSP listener");
-  socklen_t len = sizeof(sa);
-  const bool ok = bind(fd, reinterpret_cast<sockaddr*>(&sa), sizeof(sa)) == 0 &&
-                  getsockname(fd, reinterpret_cast<sockaddr*>(&sa), &len) == 0;
-  close(fd);
-  if (!ok) return UnavailableError("no free port for an RTSP listener on " + host);
-  return static_cast<int>(ntohs(sa.sin_port));
-}
 
 }  // namespace
 
-std::unique_ptr<IngestSource> MakeRtspPushSource(const v1::RtspPush& push,
-                                                 const std::string& ingest_url) {
-  return std::make_unique<RtspPushSource>(push, ingest_url);
-}
-
-StatusOr<std::string> RtspPushIngestUrl(const std::string& host, const std::string& path) {
-  auto port = PickFreeTcpPort(host);
-  if (!port.ok()) return port.status();
-  return "rtsp://" + host + ":" + std::to_string(*port) + "/" + path;
+std::unique_ptr<IngestSource> MakeRtspPushSource(const std::string& session_name,
+                                                 const v1::RtspPush& push) {
+  return std::make_unique<RtspPushSource>(session_name, push);
 }
 
 }  // namespace slapse::server

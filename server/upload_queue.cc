@@ -89,7 +89,9 @@ UploadQueue::Clock::time_point UploadQueue::IdleDeadlineLocked() const {
   return (started_ ? last_write_ : created_) + std::chrono::milliseconds(ms);
 }
 
-int UploadQueue::Read(uint8_t* buf, int size) {
+int UploadQueue::Read(uint8_t* buf, int size) { return Read(buf, size, nullptr); }
+
+int UploadQueue::Read(uint8_t* buf, int size, const std::function<bool()>& interrupt) {
   std::unique_lock<std::mutex> lock(mu_);
   auto ready = [&] { return closed_ || finished_ || !chunks_.empty(); };
   while (!ready()) {
@@ -98,7 +100,10 @@ int UploadQueue::Read(uint8_t* buf, int size) {
       CloseLocked(IdleTimeoutErrorLocked());
       break;
     }
-    if (deadline == Clock::time_point::max()) {
+    if (interrupt) {
+      if (interrupt()) return -1;
+      readable_.wait_until(lock, std::min(deadline, Clock::now() + std::chrono::milliseconds(50)));
+    } else if (deadline == Clock::time_point::max()) {
       readable_.wait(lock);
     } else {
       readable_.wait_until(lock, deadline);

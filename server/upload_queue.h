@@ -54,6 +54,9 @@ class UploadQueue {
 
   // ByteSource semantics: blocks until bytes, end of stream (0) or Close (-1).
   int Read(uint8_t* buf, int size);
+  // As Read, and returns -1 without closing the queue once `interrupt`
+  // (polled every 50 ms while waiting) returns true.
+  int Read(uint8_t* buf, int size, const std::function<bool()>& interrupt);
 
   int64_t total_bytes() const;
   // Why the queue was closed (OK while open or closed with OK).

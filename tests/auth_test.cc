@@ -25,6 +25,7 @@
 #include <grpcpp/create_channel.h>
 #include <grpcpp/security/credentials.h>
 
+#include "api/convert.h"
 #include "client/lib/client.h"
 #include "server/auth.h"
 #include "server/server.h"
@@ -459,7 +460,9 @@ class ServeProcess : public testing::ChildProcess {
       : out_(dir + "/serve.out"), err_(dir + "/serve.err") {
     // --http-port 0: no HTTP listener, so the fixed default 8080 cannot collide
     // with another test's server running at the same time.
-    args.insert(args.begin(), {SLAPSE_CLI, "serve", "--port", "0", "--http-port", "0"});
+    // --rtsp-port 0 likewise for the RTSP ingest port (8554).
+    args.insert(args.begin(),
+                {SLAPSE_CLI, "serve", "--port", "0", "--http-port", "0", "--rtsp-port", "0"});
     std::vector<char*> c;
     for (std::string& a : args) c.push_back(a.data());
     c.push_back(nullptr);
@@ -525,11 +528,16 @@ bool ListensOnLoopbackOnly(int port) {
 TEST(BindTest, TheCliServesLoopbackByDefaultAndRefusesAnUnprotectedPublicAddress) {
   const std::string dir = testing::MakeTempDir("auth_bind");
   {
-    ServeProcess serve(dir, {});
+    ServeProcess serve(dir, {"--data-dir", dir + "/data"});  // not the shared default
     const std::string address = serve.Address();
     ASSERT_EQ(address.rfind("127.0.0.1:", 0), 0u) << serve.Stdout() << serve.Stderr();
     const int port = std::stoi(address.substr(10));
     EXPECT_TRUE(ListensOnLoopbackOnly(port));
+    // The RTSP ingest port follows --address.
+    const std::string out = serve.Stdout();
+    const std::string rtsp = "RTSP ingest on rtsp://127.0.0.1:";
+    ASSERT_NE(out.find(rtsp), std::string::npos) << out;
+    EXPECT_TRUE(ListensOnLoopbackOnly(std::stoi(out.substr(out.find(rtsp) + rtsp.size()))));
     serve.Stop();
   }
   ServeProcess refused(dir, {"--address", "0.0.0.0"});
@@ -561,7 +569,9 @@ TEST(SecretsTest, APlantedSecretAppearsInNoOutput) {
   const std::string kWrongBearer = "planted-wrong-bearer-4711";
   const std::string dir = testing::MakeTempDir("auth_secrets");
   testing::WriteFileBytes(dir + "/tokens.json", TokensJson({{kBearer, "acme"}}));
-  ServeProcess serve(dir, {"--tokens-file", dir + "/tokens.json"});
+  // A data directory of its own: the default one is locked by whichever test's
+  // server started first when ctest runs them side by side.
+  ServeProcess serve(dir, {"--tokens-file", dir + "/tokens.json", "--data-dir", dir + "/data"});
   const std::string address = serve.Address();
   ASSERT_FALSE(address.empty()) << serve.Stderr();
 
@@ -628,6 +638,74 @@ TEST(SecretsTest, APlantedSecretAppearsInNoOutput) {
   outputs += serve.Stdout() + serve.Stderr();
 
   for (const std::string& secret : {kPassword, kQueryToken, kBearer, kWrongBearer}) {
+    EXPECT_EQ(outputs.find(secret), std::string::npos)
+        << "'" << secret << "' leaked:\n"
+        << outputs.substr(outputs.find(secret) > 400 ? outputs.find(secret) - 400 : 0, 800);
+  }
+}
+
+// RTSP push: the publish password is shown once, in the CreateSession
+// response (and `create`'s output); a wrong one planted by a publisher and
+// the real one appear in no other output: rpcs, events, errors, the CLI, the
+// server's log (which sees the refused and the accepted publisher).
+TEST(SecretsTest, TheRtspPublishPasswordIsShownOnceOnly) {
+  const std::string kWrongPassword = "PlantedPublishPw4711";
+  const std::string dir = testing::MakeTempDir("auth_rtsp_secret");
+  auto drive = testing::SimulateTestDrive("auth_rtsp", testing::SmallMpeg2DriveOptions(7, 2.0));
+  ASSERT_TRUE(drive.ok()) << drive.status().ToString();
+  ServeProcess serve(dir, {"--data-dir", dir + "/data"});
+  const std::string address = serve.Address();
+  ASSERT_FALSE(address.empty()) << serve.Stderr();
+  auto c = SlapseClient::Connect(address, testing::TestClientOptions());
+  v1::Session r = UploadRequest();
+  r.clear_upload();
+  *r.mutable_intrinsics() = api::IntrinsicsToProto(drive->intrinsics);
+  r.mutable_rtsp_push()->set_path("cam");
+  r.mutable_rtsp_push()->set_start_timeout_ms(20000);
+  auto created = c->CreateSession(r);
+  ASSERT_TRUE(created.ok()) << created.status().ToString();
+  const std::string password = created->publish_credentials().password();
+  ASSERT_GE(password.size(), 32u);
+  const std::string name = created->name();
+  std::string outputs;  // everything else that left the server or the CLI
+  // A publisher with a wrong password is refused; the right one publishes.
+  v1::Session wrong = *created;
+  wrong.mutable_publish_credentials()->set_password(kWrongPassword);
+  testing::FfmpegProcess refused({"-re", "-i", drive->video_path, "-c", "copy", "-f", "rtsp",
+                                  "-rtsp_transport", "tcp", testing::PublishUrl(wrong)});
+  EXPECT_NE(refused.Wait(std::chrono::seconds(10)), 0);
+  testing::FfmpegProcess camera({"-re", "-i", drive->video_path, "-c", "copy", "-f", "rtsp",
+                                 "-rtsp_transport", "tcp", testing::PublishUrl(*created)});
+  Status watched = c->Watch(name, 0, [&](const v1::SessionEvent& e) {
+    outputs += Text(e);
+    return true;
+  });
+  EXPECT_TRUE(watched.ok()) << watched.ToString();
+  auto got = c->GetSession(name);
+  ASSERT_TRUE(got.ok());
+  EXPECT_EQ(got->state(), v1::Session::FINISHED) << got->state_message();
+  outputs += Text(*got);
+  outputs += Text(*c->ListSessions(0, "", v1::Session::STATE_UNSPECIFIED));
+  const std::string cli_out = dir + "/cli.out";
+  for (const std::string& args :
+       {"get " + name + " --json", std::string("list"), "watch " + name + " --json",
+        "export " + name + " --format json --out -"}) {
+    testing::RunCommand(std::string(SLAPSE_CLI) + " " + args + " --server " + address + " >>" +
+                        cli_out + " 2>&1");
+  }
+  outputs += testing::ReadFileBytes(cli_out);
+  // `create` shows the publish URL with the credentials, once.
+  const std::string create_out = dir + "/create.out";
+  testing::RunCommand(std::string(SLAPSE_CLI) + " create --rtsp-push cam2 --intrinsics " +
+                      "300,300,160,120 --server " + address + " >" + create_out + " 2>&1");
+  const std::string created_text = testing::ReadFileBytes(create_out);
+  EXPECT_NE(created_text.find("rtsp://"), std::string::npos) << created_text;
+  // Shown, not masked: rtsp://USER:PASSWORD@127.0.0.1:PORT/sessions/ID/cam2.
+  EXPECT_NE(created_text.find("@127.0.0.1:"), std::string::npos) << created_text;
+  EXPECT_EQ(created_text.find("***"), std::string::npos) << created_text;
+  serve.Stop();
+  outputs += serve.Stdout() + serve.Stderr();
+  for (const std::string& secret : {password, kWrongPassword}) {
     EXPECT_EQ(outputs.find(secret), std::string::npos)
         << "'" << secret << "' leaked:\n"
         << outputs.substr(outputs.find(secret) > 400 ? outputs.find(secret) - 400 : 0, 800);

@@ -90,7 +90,7 @@ TEST(DashboardTest, BrowserShowsTheFleetALiveSessionAndStopsIt) {
   ASSERT_TRUE(testing::WaitForLocalPort("tcp", testing::PortOf(live->ingest_url()),
                                         std::chrono::seconds(5)));
   FfmpegProcess camera({"-re", "-stream_loop", "-1", "-i", drive->video_path, "-c", "copy", "-f",
-                        "rtsp", "-rtsp_transport", "tcp", live->ingest_url()});
+                        "rtsp", "-rtsp_transport", "tcp", testing::PublishUrl(*live)});
   ASSERT_TRUE(camera.started());
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
   while (std::chrono::steady_clock::now() < deadline) {

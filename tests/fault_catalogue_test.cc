@@ -511,6 +511,56 @@ void FaultCatalogueTest::AddStateItems(std::vector<Item>* out) {
                      r.mutable_rtsp_push()->set_start_timeout_ms(300);
                      return CreateAndEnd(r);
                    }});
+  items.push_back({"RTSP publisher killed mid-stream (no TEARDOWN)", FAILED,
+                   StatusCode::kUnavailable, "lost without a TEARDOWN", [this] {
+                     v1::Session r = Request();
+                     r.mutable_rtsp_push()->set_path("killed");
+                     r.mutable_rtsp_push()->set_start_timeout_ms(10000);
+                     auto created = client_->CreateSession(r);
+                     if (!created.ok()) return FromStatus(created.status());
+                     FfmpegProcess cam({"-re", "-i", drive_path_, "-c", "copy", "-f", "rtsp",
+                                        "-rtsp_transport", "tcp", testing::PublishUrl(*created)});
+                     const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+                     while (std::chrono::steady_clock::now() < until) {
+                       auto got = client_->GetSession(created->name());
+                       if (!got.ok() || got->stats().frames() >= 5) break;
+                       std::this_thread::sleep_for(std::chrono::milliseconds(20));
+                     }
+                     cam.Kill();  // SIGKILL: the connection closes without TEARDOWN
+                     return EndOf(created->name());
+                   }});
+  items.push_back({"RTSP publisher with a wrong password (refused), then the right one",
+                   v1::Session::FINISHED, StatusCode::kOk,
+                   "the publisher ended the stream (TEARDOWN)", [this] {
+                     v1::Session r = Request();
+                     r.mutable_rtsp_push()->set_path("wrongpw");
+                     r.mutable_rtsp_push()->set_start_timeout_ms(10000);
+                     auto created = client_->CreateSession(r);
+                     if (!created.ok()) return FromStatus(created.status());
+                     v1::Session wrong = *created;
+                     wrong.mutable_publish_credentials()->set_password("not-the-password");
+                     FfmpegProcess bad({"-i", drive_path_, "-c", "copy", "-f", "rtsp",
+                                        "-rtsp_transport", "tcp", testing::PublishUrl(wrong)});
+                     if (bad.Wait(std::chrono::seconds(10)) == 0) {
+                       (void)client_->StopSession(created->name());
+                       return Outcome{v1::Session::STATE_UNSPECIFIED, StatusCode::kUnknown,
+                                      "the wrong password was accepted"};
+                     }
+                     FfmpegProcess cam({"-re", "-i", drive_path_, "-c", "copy", "-f", "rtsp",
+                                        "-rtsp_transport", "tcp", testing::PublishUrl(*created)});
+                     cam.Wait(std::chrono::seconds(15));
+                     return EndOf(created->name());
+                   }});
+  items.push_back(
+      {"RTSP ANNOUNCE to an unknown path", I, StatusCode::kNotFound, "RTSP 404", [this] {
+         const int status = testing::RtspRequestStatus(
+             server_->sessions().rtsp_port(), "ANNOUNCE",
+             "rtsp://127.0.0.1:" + std::to_string(server_->sessions().rtsp_port()) +
+                 "/sessions/nosuchsession/cam",
+             "v=0\r\nm=video 0 RTP/AVP 32\r\n");
+         return Outcome{I, status == 404 ? StatusCode::kNotFound : StatusCode::kUnknown,
+                        "RTSP " + std::to_string(status)};
+       }});
   items.push_back({"RTP without sender (start 300 ms)", FAILED, StatusCode::kDeadlineExceeded,
                    "no RTP video arrived within start_timeout_ms=300", [this] {
                      v1::Session r = Request();
@@ -706,7 +756,7 @@ TEST_F(FaultCatalogueTest, EveryItemHasItsStatusAndTheHealthySessionIsUnaffected
   ASSERT_TRUE(testing::WaitForLocalPort("tcp", testing::PortOf(cam->ingest_url()),
                                         std::chrono::seconds(5)));
   FfmpegProcess camera({"-re", "-stream_loop", "3", "-i", drive_path_, "-c", "copy", "-f", "rtsp",
-                        "-rtsp_transport", "tcp", cam->ingest_url()});
+                        "-rtsp_transport", "tcp", testing::PublishUrl(*cam)});
   ASSERT_TRUE(camera.started());
 
   std::vector<Item> items = Catalogue();

@@ -60,7 +60,8 @@ class ServeProcess : public ChildProcess {
     std::vector<std::string> argv = {
         SLAPSE_CLI,           "serve",      "--address", "127.0.0.1",      "--port",
         std::to_string(port), "--data-dir", data_dir,    "--max-sessions", "4",
-        "--http-port",        "0"};  // no HTTP: 8080 may be another test's
+        "--http-port",        "0",   // no HTTP: 8080 may be another test's
+        "--rtsp-port",        "0"};  // a free RTSP ingest port: 8554 may be another test's
     std::vector<char*> c;
     for (std::string& a : argv) c.push_back(a.data());
     c.push_back(nullptr);
@@ -190,7 +191,7 @@ TEST_F(PersistenceTest, KillNineThenCleanStopLoseNothingCommitted) {
   req.mutable_rtsp_push()->set_receive_timeout_ms(60000);
   auto b = client_->CreateSession(req);
   ASSERT_TRUE(b.ok()) << b.status().ToString();
-  auto camera = Camera(b->ingest_url());
+  auto camera = Camera(testing::PublishUrl(*b));
 
   // C: an upload in flight (half the bytes sent, not half-closed).
   req = Request();
@@ -269,7 +270,11 @@ TEST_F(PersistenceTest, KillNineThenCleanStopLoseNothingCommitted) {
   EXPECT_EQ(d->name().size(), std::string("sessions/").size() + 26);
 
   // B's camera comes back: B runs again, its new poses in segment 1.
-  camera = Camera(b_now->ingest_url());
+  // The ingest URL names this run's RTSP port; the credentials shown at
+  // creation still hold (they derive from the data directory's key).
+  v1::Session b_publish = *b_now;
+  *b_publish.mutable_publish_credentials() = b->publish_credentials();
+  camera = Camera(testing::PublishUrl(b_publish));
   const v1::Session b_running = WaitFor(*client_, b->name(), [&](const v1::Session& s) {
     return s.stats().anchor_pairs() > b_now->stats().anchor_pairs() + 5;
   });

@@ -12,6 +12,8 @@
 #include <thread>
 #include <utility>
 
+#include "server/rtsp_ingest.h"
+
 namespace slapse::testing {
 
 // Every rpc of these tests has a deadline; a hang fails, it does not block ctest.
@@ -112,6 +114,45 @@ std::string Mpeg2RtpSdp(int port) {
 int PortOf(const std::string& url) {
   const size_t colon = url.rfind(':');
   return colon == std::string::npos ? 0 : std::atoi(url.c_str() + colon + 1);
+}
+
+std::string PublishUrl(const v1::Session& created) {
+  return server::RtspPublishUrl(created.ingest_url(), {created.publish_credentials().username(),
+                                                       created.publish_credentials().password()});
+}
+
+int RtspRequestStatus(int port, const std::string& method, const std::string& url,
+                      const std::string& sdp) {
+  const int fd = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  if (fd < 0) return -1;
+  sockaddr_in sa{};
+  sa.sin_family = AF_INET;
+  sa.sin_port = htons(static_cast<uint16_t>(port));
+  sa.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  timeval tv{5, 0};
+  setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof(tv));
+  std::string request = method + " " + url + " RTSP/1.0\r\nCSeq: 1\r\n";
+  if (!sdp.empty()) {
+    request +=
+        "Content-Type: application/sdp\r\nContent-Length: " + std::to_string(sdp.size()) + "\r\n";
+  }
+  request += "\r\n" + sdp;
+  std::string answer;
+  if (connect(fd, reinterpret_cast<sockaddr*>(&sa), sizeof(sa)) == 0 &&
+      send(fd, request.data(), request.size(), MSG_NOSIGNAL) ==
+          static_cast<ssize_t>(request.size())) {
+    char buf[512];
+    while (answer.find("\r\n") == std::string::npos) {
+      const ssize_t n = recv(fd, buf, sizeof(buf), 0);
+      if (n <= 0) break;
+      answer.append(buf, static_cast<size_t>(n));
+    }
+  }
+  close(fd);
+  // "RTSP/1.0 404 Not Found"
+  const std::string prefix = "RTSP/1.0 ";
+  if (answer.compare(0, prefix.size(), prefix) != 0) return -1;
+  return std::atoi(answer.c_str() + prefix.size());
 }
 
 }  // namespace slapse::testing

@@ -36,4 +36,14 @@ std::string Mpeg2RtpSdp(int port);
 // The port of "rtsp://host:port/path".
 int PortOf(const std::string& url);
 
+// RTSP push: the URL a publisher (ffmpeg) uses for the session CreateSession
+// returned, its publish credentials put in (user:password@).
+std::string PublishUrl(const v1::Session& created);
+
+// Sends one RTSP request (`method` on `url`, with an SDP body for ANNOUNCE)
+// to 127.0.0.1:port on a connection of its own and returns the status code
+// of the answer (e.g. 401, 404), or -1 if none came within 5 s.
+int RtspRequestStatus(int port, const std::string& method, const std::string& url,
+                      const std::string& sdp = "");
+
 }  // namespace slapse::testing

@@ -176,8 +176,7 @@ TEST(IngestSourceTest, RtspPushEndsWithThePublisher) {
   EXPECT_FALSE(source->AfterConnection(s.get(), end).has_value());
   EXPECT_EQ(s->Snapshot().state(), v1::Session::FINISHED);
   const auto events = AllEvents(*s);
-  EXPECT_EQ(events.back().state_change().message(),
-            "the publisher ended the stream (TEARDOWN or closed connection)");
+  EXPECT_EQ(events.back().state_change().message(), "the publisher ended the stream (TEARDOWN)");
 }
 
 TEST(IngestSourceTest, UploadHasNoDeadline) {

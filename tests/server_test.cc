@@ -190,9 +190,10 @@ TEST_F(ServerTest, RtspPushStreamsPosesToFinished) {
   request.mutable_rtsp_push()->set_receive_timeout_ms(3000);
   auto created = client_->CreateSession(request);
   ASSERT_TRUE(created.ok()) << created.status().ToString();
-  const std::string url = created->ingest_url();
-  ASSERT_EQ(url.rfind("rtsp://127.0.0.1:", 0), 0u) << url;
-  ASSERT_EQ(url.substr(url.size() - 5), "/cam1") << url;
+  const std::string url = testing::PublishUrl(*created);
+  const std::string& ingest = created->ingest_url();
+  ASSERT_EQ(ingest, "rtsp://127.0.0.1:" + std::to_string(server_->sessions().rtsp_port()) + "/" +
+                        created->name() + "/cam1");
   Status watch_end;
   std::vector<v1::SessionEvent> events;
   std::thread watcher([&] { events = WatchAll(created->name(), 0, &watch_end); });
@@ -208,6 +209,9 @@ TEST_F(ServerTest, RtspPushStreamsPosesToFinished) {
   EXPECT_GT(CountPoses(events), 5);
   ASSERT_FALSE(events.empty());
   EXPECT_EQ(events.back().state_change().state(), v1::Session::FINISHED)
+      << events.back().state_change().message();
+  EXPECT_EQ(
+      events.back().state_change().message().find("the publisher ended the stream (TEARDOWN)"), 0u)
       << events.back().state_change().message();
   auto got = client_->GetSession(created->name());
   ASSERT_TRUE(got.ok()) << got.status().ToString();
@@ -272,7 +276,7 @@ std::string StartRtspCamera(SlapseClient* client, v1::Session request, const std
   auto created = client->CreateSession(request);
   EXPECT_TRUE(created.ok()) << created.status().ToString();
   if (!created.ok()) return "";
-  const std::string url = created->ingest_url();
+  const std::string url = testing::PublishUrl(*created);
   EXPECT_TRUE(WaitForLocalPort("tcp", PortOf(url), std::chrono::seconds(5)));
   *camera = std::make_unique<FfmpegProcess>(std::vector<std::string>{
       "-re", "-i", drive, "-c", "copy", "-f", "rtsp", "-rtsp_transport", "tcp", url});
@@ -290,7 +294,8 @@ std::string StartRtspCamera(SlapseClient* client, v1::Session request, const std
 
 // A camera that stops mid-stream ends the session visibly and soon, never a
 // hang: frozen (connection open, silent) it FAILs with UNAVAILABLE after
-// receive_timeout_ms; killed (connection closed) it ends at once.
+// receive_timeout_ms; killed (connection closed without TEARDOWN) it FAILs at
+// once with UNAVAILABLE saying the camera was lost.
 TEST_F(ServerTest, RtspCameraThatStopsMidStreamEndsTheSession) {
   v1::Session request = UploadRequest();
   request.mutable_rtsp_push()->set_path("cam2");
@@ -324,9 +329,8 @@ TEST_F(ServerTest, RtspCameraThatStopsMidStreamEndsTheSession) {
   EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(4));
   ASSERT_FALSE(events.empty());
   const v1::StateChange& last = events.back().state_change();
-  EXPECT_TRUE(last.state() == v1::Session::FINISHED || last.state() == v1::Session::FAILED)
-      << last.state();
-  EXPECT_FALSE(last.message().empty());
+  EXPECT_EQ(last.state(), v1::Session::FAILED) << last.message();
+  EXPECT_NE(last.message().find("lost without a TEARDOWN"), std::string::npos) << last.message();
 }
 
 // No publisher: start_timeout_ms fails the session; StopSession aborts the wait.

@@ -137,9 +137,15 @@ int RunServe(int argc, char** argv) {
                  "(DEADLINE_EXCEEDED), freeing its worker (0: never)")
       ->type_name("S")
       ->capture_default_str();
+  o.sessions.rtsp_push_host.clear();  // unset: the gRPC --address
   app.add_option("--rtsp-host", o.sessions.rtsp_push_host,
-                 "address RTSP push listeners bind and advertise")
-      ->type_name("IPV4")
+                 "address the RTSP ingest port binds and ingest URLs name (default: --address)")
+      ->type_name("IPV4");
+  int64_t rtsp_port = 8554;  // the CLI's fixed, documented port (docs/DEPLOY.md)
+  app.add_option("--rtsp-port", rtsp_port,
+                 "the one RTSP ingest port of every RTSP push session: publishers ANNOUNCE / "
+                 "RECORD at /sessions/ID/PATH with the session's credentials (0: a free port)")
+      ->type_name("PORT")
       ->capture_default_str();
   // serve persists by default; the library's default (in memory) is for
   // tests and embedding.
@@ -228,6 +234,7 @@ int RunServe(int argc, char** argv) {
   for (const Status& s :
        {CheckRange("retention-ttl-s", retention_ttl_s, int64_t{0}, int64_t{1} << 40),
         CheckRange("port", port, int64_t{0}, int64_t{65535}),
+        CheckRange("rtsp-port", rtsp_port, int64_t{0}, int64_t{65535}),
         CheckRange("tokens-reload-ms", o.auth.tokens_reload_interval_ms, int64_t{0},
                    int64_t{1} << 31),
         CheckRange("max-sessions", max_sessions, int64_t{1}, int64_t{1024}),
@@ -244,6 +251,8 @@ int RunServe(int argc, char** argv) {
   o.sessions.create_idle_timeout_ms = create_idle_s * 1000;
   o.sessions.upload_stall_timeout_ms = stall_s * 1000;
   o.sessions.retention_ttl_s = retention_ttl_s;
+  o.sessions.rtsp_port = static_cast<int>(rtsp_port);
+  if (o.sessions.rtsp_push_host.empty()) o.sessions.rtsp_push_host = o.address;
 
   // Block the shutdown signals before gRPC starts its threads; wait for them below.
   sigset_t signals;
@@ -266,6 +275,8 @@ int RunServe(int argc, char** argv) {
     std::printf("slapse metrics on http://%s:%d/metrics\n", o.address.c_str(),
                 (*server)->http_port());
   }
+  std::printf("slapse RTSP ingest on rtsp://%s:%d\n", o.sessions.rtsp_push_host.c_str(),
+              (*server)->sessions().rtsp_port());
   std::fflush(stdout);
   server::Log(server::LogLevel::kInfo, "", "serve",
               "gRPC on " + o.address + ":" + std::to_string((*server)->port()) +
@@ -466,7 +477,14 @@ int RunCreate(int argc, char** argv) {
   auto session = Connect(server)->CreateSession(request);
   if (!session.ok()) return Fail("create", session.status().ToString());
   std::printf("%s\n", session->name().c_str());
-  if (!session->ingest_url().empty()) std::printf("%s\n", session->ingest_url().c_str());
+  if (!session->ingest_url().empty()) {
+    // RTSP push: the publish URL with the session's credentials, shown this
+    // once (GetSession never returns them).
+    const v1::RtspPublishCredentials& c = session->publish_credentials();
+    std::printf(
+        "%s\n",
+        server::RtspPublishUrl(session->ingest_url(), {c.username(), c.password()}).c_str());
+  }
   return 0;
 }
 

@@ -1,0 +1,53 @@
+#!/usr/bin/python3
+"""A camera that publishes an MPEG-TS file (MPEG-2 video) over RTSP with
+GStreamer's rtspclientsink (ANNOUNCE / SETUP / RECORD, RTP over TCP, TEARDOWN
+at the end), at real time. The second publisher implementation of the RTSP
+push tests (ffmpeg is the first).
+
+    rtsp_publish.py FILE rtsp://USER:PASSWORD@HOST:PORT/PATH
+
+Exit status 0 once the whole file was sent and the server took the
+TEARDOWN, 1 on an error (e.g. 401 from the server).
+
+Needs python3-gi, GStreamer's base, good and bad plugins and gstreamer1.0-rtsp
+(deploy/install-deps.sh).
+"""
+import sys
+from urllib.parse import urlsplit, unquote
+
+import gi
+
+gi.require_version("Gst", "1.0")
+from gi.repository import Gst  # noqa: E402
+
+
+def main():
+    if len(sys.argv) != 3:
+        print(__doc__, file=sys.stderr)
+        return 2
+    path, url = sys.argv[1], sys.argv[2]
+    Gst.init(None)
+    parts = urlsplit(url)
+    location = "rtsp://%s:%d%s" % (parts.hostname, parts.port, parts.path)
+    pipeline = Gst.parse_launch(
+        "filesrc name=src ! tsdemux ! mpegvideoparse ! "
+        "rtspclientsink name=sink protocols=tcp latency=0")
+    pipeline.get_by_name("src").set_property("location", path)
+    sink = pipeline.get_by_name("sink")
+    sink.set_property("location", location)
+    if parts.username:
+        sink.set_property("user-id", unquote(parts.username))
+        sink.set_property("user-pw", unquote(parts.password or ""))
+    pipeline.set_state(Gst.State.PLAYING)
+    bus = pipeline.get_bus()
+    msg = bus.timed_pop_filtered(60 * Gst.SECOND, Gst.MessageType.EOS | Gst.MessageType.ERROR)
+    ok = msg is not None and msg.type == Gst.MessageType.EOS
+    if msg is not None and msg.type == Gst.MessageType.ERROR:
+        err, _ = msg.parse_error()
+        print("rtsp_publish: %s" % err.message, file=sys.stderr)
+    pipeline.set_state(Gst.State.NULL)  # TEARDOWN
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

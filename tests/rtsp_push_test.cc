@@ -1,0 +1,377 @@
+// RTSP push ingest on the server's one RTSP port (server/rtsp_ingest.h,
+// gst-rtsp-server): real publishers (ffmpeg, and GStreamer's rtspclientsink
+// through tests/rtsp_publish.py; ANNOUNCE / RECORD over TCP) and raw RTSP
+// requests against a real server on loopback.
+//   - two sessions publish on the same port at once, each to its own path,
+//     and each equals the offline run of its own drive;
+//   - no or wrong credentials: 401 (another session's: refused too), the
+//     session untouched;
+//   - an unknown path: 404; a second publisher to a busy path: refused;
+//   - TEARDOWN ends FINISHED, a killed publisher FAILED (UNAVAILABLE, "lost").
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "api/convert.h"
+#include "client/lib/client.h"
+#include "core/mv/mv_reader.h"
+#include "core/pipeline/pipeline.h"
+#include "core/pipeline/result_io.h"
+#include "server/rtsp_ingest.h"
+#include "server/server.h"
+#include "tests/server_fixture.h"
+#include "tests/test_streams.h"
+
+namespace slapse {
+namespace {
+
+using client::SlapseClient;
+using server::SlapseServer;
+using testing::FfmpegProcess;
+using testing::PublishUrl;
+using testing::RtspRequestStatus;
+
+// A minimal valid ANNOUNCE body (MPEG-2 video, static payload type 32).
+constexpr const char* kSdp =
+    "v=0\r\no=- 0 0 IN IP4 127.0.0.1\r\ns=test\r\nc=IN IP4 127.0.0.1\r\nt=0 0\r\n"
+    "m=video 0 RTP/AVP 32\r\na=rtpmap:32 MPV/90000\r\na=control:streamid=0\r\n";
+
+// What `slapse run` computes from a file with a session's default options.
+struct Offline {
+  int64_t frames = 0;
+  std::vector<TimedPose> trajectory;
+};
+
+StatusOr<Offline> RunOffline(const testing::TestDrive& drive) {
+  auto reader = MvReader::Open(drive.video_path);
+  if (!reader.ok()) return reader.status();
+  Intrinsics k = drive.intrinsics;
+  k.width_px = (*reader)->info().width_px;
+  k.height_px = (*reader)->info().height_px;
+  Pipeline pipeline(k, (*reader)->info().mv_sigma_px(), PipelineOptions{});
+  Offline out;
+  FrameRecord frame;
+  Status end;
+  while ((end = (*reader)->Next(&frame)).ok()) {
+    auto step = pipeline.Push(frame);
+    if (!step.ok()) return step.status();
+    ++out.frames;
+  }
+  if (end.code() != StatusCode::kOutOfRange) return end;
+  out.trajectory = TimedPosesOf(pipeline.poses());
+  return out;
+}
+
+class RtspPushTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    for (uint64_t seed : {31, 32}) {
+      auto drive =
+          testing::SimulateTestDrive("rtsp_push_test", testing::SmallMpeg2DriveOptions(seed, 3.0));
+      ASSERT_TRUE(drive.ok()) << drive.status().ToString();
+      auto offline = RunOffline(*drive);
+      ASSERT_TRUE(offline.ok()) << offline.status().ToString();
+      drives_.push_back(std::move(*drive));
+      offline_.push_back(std::move(*offline));
+    }
+  }
+
+  void SetUp() override {
+    ASSERT_EQ(drives_.size(), 2u);
+    for (const Offline& o : offline_) ASSERT_GE(o.trajectory.size(), 5u);  // not vacuous
+    server::ServerOptions o;
+    o.address = "127.0.0.1";
+    o.port = 0;
+    o.sessions.max_sessions = 4;
+    o.sessions.rtsp_port = 0;  // a free one: ctest runs tests side by side
+    o.shutdown_grace_s = 1;
+    auto server = SlapseServer::Start(o);
+    ASSERT_TRUE(server.ok()) << server.status().ToString();
+    server_ = std::move(*server);
+    rtsp_port_ = server_->sessions().rtsp_port();
+    ASSERT_GT(rtsp_port_, 0);
+    client_ = SlapseClient::Connect("127.0.0.1:" + std::to_string(server_->port()),
+                                    testing::TestClientOptions());
+  }
+  void TearDown() override {
+    if (server_) server_->Shutdown();
+  }
+
+  v1::Session Create(const std::string& path, int drive = 0) {
+    v1::Session request;
+    request.mutable_rtsp_push()->set_path(path);
+    request.mutable_rtsp_push()->set_start_timeout_ms(20000);
+    request.mutable_rtsp_push()->set_receive_timeout_ms(5000);
+    *request.mutable_intrinsics() = api::IntrinsicsToProto(drives_[drive].intrinsics);
+    auto created = client_->CreateSession(request);
+    EXPECT_TRUE(created.ok()) << created.status().ToString();
+    return created.ok() ? *created : v1::Session();
+  }
+
+  std::unique_ptr<FfmpegProcess> Publish(const std::string& url, int drive = 0) {
+    return std::make_unique<FfmpegProcess>(
+        std::vector<std::string>{"-re", "-i", drives_[drive].video_path, "-c", "copy", "-f", "rtsp",
+                                 "-rtsp_transport", "tcp", url});
+  }
+
+  // Watches `name` to its final event; returns the last StateChange.
+  v1::StateChange WatchToEnd(const std::string& name) {
+    v1::StateChange last;
+    Status watched = client_->Watch(name, 0, [&](const v1::SessionEvent& e) {
+      if (e.has_state_change()) last = e.state_change();
+      return true;
+    });
+    EXPECT_TRUE(watched.ok()) << watched.ToString();
+    return last;
+  }
+
+  // Polls until the session has decoded `frames` frames (10 s at most).
+  int64_t WaitForFrames(const std::string& name, int64_t frames) {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    int64_t got = 0;
+    while (got < frames && std::chrono::steady_clock::now() < deadline) {
+      auto s = client_->GetSession(name);
+      if (!s.ok()) break;
+      got = s->stats().frames();
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    return got;
+  }
+
+  // `time_tol_s` / `pose_tol` (relative to max(1, |value|)): 1e-9 when the
+  // publisher sends the file's own 90 kHz timestamps (ffmpeg -c copy);
+  // looser for one that re-stamps them.
+  void ExpectEqualsOffline(const std::string& name, const Offline& offline,
+                           double time_tol_s = 1e-9, double pose_tol = 1e-9) {
+    auto session = client_->GetSession(name);
+    auto trajectory = client_->GetTrajectory(name);
+    ASSERT_TRUE(session.ok()) << session.status().ToString();
+    ASSERT_TRUE(trajectory.ok()) << trajectory.status().ToString();
+    EXPECT_EQ(session->stats().frames(), offline.frames);
+    ASSERT_EQ(trajectory->points_size(), static_cast<int>(offline.trajectory.size()));
+    // The same coded frames with the same 90 kHz timestamps (RTP's, kept
+    // exactly through MPEG-TS) give the same vectors, so the same poses.
+    for (size_t i = 0; i < offline.trajectory.size(); ++i) {
+      const TimedPose& o = offline.trajectory[i];
+      const v1::Trajectory::Point& s = trajectory->points(static_cast<int>(i));
+      SCOPED_TRACE("pose " + std::to_string(i));
+      EXPECT_EQ(s.anchor_index(), o.index);
+      EXPECT_NEAR(s.timestamp_s(), o.timestamp_s, time_tol_s);
+      EXPECT_NEAR(s.world_from_cam().tx(), o.world_from_cam.translation.x(),
+                  pose_tol * std::max(1.0, std::abs(o.world_from_cam.translation.x())));
+      EXPECT_NEAR(s.world_from_cam().ty(), o.world_from_cam.translation.y(),
+                  pose_tol * std::max(1.0, std::abs(o.world_from_cam.translation.y())));
+      EXPECT_NEAR(s.world_from_cam().tz(), o.world_from_cam.translation.z(),
+                  pose_tol * std::max(1.0, std::abs(o.world_from_cam.translation.z())));
+      EXPECT_NEAR(s.world_from_cam().qx(), o.world_from_cam.rotation.x(),
+                  pose_tol * std::max(1.0, std::abs(o.world_from_cam.rotation.x())));
+      EXPECT_NEAR(s.world_from_cam().qy(), o.world_from_cam.rotation.y(),
+                  pose_tol * std::max(1.0, std::abs(o.world_from_cam.rotation.y())));
+      EXPECT_NEAR(s.world_from_cam().qz(), o.world_from_cam.rotation.z(),
+                  pose_tol * std::max(1.0, std::abs(o.world_from_cam.rotation.z())));
+      EXPECT_NEAR(s.world_from_cam().qw(), o.world_from_cam.rotation.w(),
+                  pose_tol * std::max(1.0, std::abs(o.world_from_cam.rotation.w())));
+    }
+  }
+
+  static std::vector<testing::TestDrive> drives_;
+  static std::vector<Offline> offline_;
+  std::unique_ptr<SlapseServer> server_;
+  std::unique_ptr<SlapseClient> client_;
+  int rtsp_port_ = 0;
+};
+
+std::vector<testing::TestDrive> RtspPushTest::drives_;
+std::vector<Offline> RtspPushTest::offline_;
+
+TEST_F(RtspPushTest, TwoPublishersOnOnePortEachEqualTheirOfflineRun) {
+  const v1::Session a = Create("gate", 0);
+  const v1::Session b = Create("gate", 1);  // the same path: each under its own session
+  ASSERT_FALSE(a.name().empty());
+  ASSERT_FALSE(b.name().empty());
+  const std::string port = ":" + std::to_string(rtsp_port_) + "/";
+  EXPECT_EQ(a.ingest_url(),
+            "rtsp://127.0.0.1" + port + a.name() + "/gate");  // name = "sessions/<id>"
+  EXPECT_EQ(b.ingest_url(), "rtsp://127.0.0.1" + port + b.name() + "/gate");
+  // The credentials are per session and shown at creation only.
+  EXPECT_FALSE(a.publish_credentials().password().empty());
+  EXPECT_NE(a.publish_credentials().password(), b.publish_credentials().password());
+  auto got = client_->GetSession(a.name());
+  ASSERT_TRUE(got.ok());
+  EXPECT_FALSE(got->has_publish_credentials());
+  // Output only: credentials a client puts in its request are dropped.
+  v1::Session planted;
+  planted.mutable_rtsp_push()->set_path("planted");
+  planted.mutable_publish_credentials()->set_password("planted-by-the-client");
+  *planted.mutable_intrinsics() = api::IntrinsicsToProto(drives_[0].intrinsics);
+  auto with_planted = client_->CreateSession(planted);
+  ASSERT_TRUE(with_planted.ok()) << with_planted.status().ToString();
+  EXPECT_NE(with_planted->publish_credentials().password(), "planted-by-the-client");
+  EXPECT_FALSE(client_->GetSession(with_planted->name())->has_publish_credentials());
+  ASSERT_TRUE(client_->DeleteSession(with_planted->name()).ok());
+  auto listed = client_->ListSessions(v1::ListSessionsRequest());
+  ASSERT_TRUE(listed.ok());
+  for (const v1::Session& s : listed->sessions()) EXPECT_FALSE(s.has_publish_credentials());
+
+  v1::StateChange end_a, end_b;
+  std::thread watch_a([&] { end_a = WatchToEnd(a.name()); });
+  std::thread watch_b([&] { end_b = WatchToEnd(b.name()); });
+  auto cam_a = Publish(PublishUrl(a), 0);
+  auto cam_b = Publish(PublishUrl(b), 1);
+  EXPECT_EQ(cam_a->Wait(std::chrono::seconds(20)), 0);
+  EXPECT_EQ(cam_b->Wait(std::chrono::seconds(20)), 0);
+  watch_a.join();
+  watch_b.join();
+  EXPECT_EQ(end_a.state(), v1::Session::FINISHED) << end_a.message();
+  EXPECT_EQ(end_b.state(), v1::Session::FINISHED) << end_b.message();
+  EXPECT_NE(end_a.message().find("TEARDOWN"), std::string::npos) << end_a.message();
+  {
+    SCOPED_TRACE("session a (drive 0)");
+    ExpectEqualsOffline(a.name(), offline_[0]);
+  }
+  {
+    SCOPED_TRACE("session b (drive 1)");
+    ExpectEqualsOffline(b.name(), offline_[1]);
+  }
+  // Ended: the path is unmounted.
+  EXPECT_EQ(RtspRequestStatus(rtsp_port_, "ANNOUNCE", a.ingest_url(), kSdp), 404);
+}
+
+// GStreamer's rtspclientsink as the camera (Digest auth, RTP over TCP,
+// TEARDOWN at the end): the same result as ffmpeg's.
+TEST_F(RtspPushTest, AGStreamerPublisherEqualsTheOfflineRunToo) {
+  const v1::Session a = Create("gst", 1);
+  ASSERT_FALSE(a.name().empty());
+  const int rc = testing::RunCommand(std::string(SLAPSE_RTSP_PUBLISH_PY) + " " +
+                                     drives_[1].video_path + " '" + PublishUrl(a) + "'");
+  EXPECT_EQ(rc, 0);
+  const v1::StateChange end = WatchToEnd(a.name());
+  EXPECT_EQ(end.state(), v1::Session::FINISHED) << end.message();
+  EXPECT_NE(end.message().find("TEARDOWN"), std::string::npos) << end.message();
+  // rtspclientsink re-stamps: its RTP timestamps are the file's truncated to
+  // ns and back, some a 90 kHz tick (11 us) early, so dt is off by up to
+  // 11 us in 33 ms (3e-4) on those frames: the same frames and anchors, times
+  // within a tick, poses within 1e-3 relative (1e-4 seen).
+  ExpectEqualsOffline(a.name(), offline_[1], 1.2e-5, 1e-3);
+}
+
+TEST_F(RtspPushTest, WrongCredentialsAre401AndTheSessionIsUntouched) {
+  const v1::Session a = Create("cam", 0);
+  const v1::Session other = Create("cam", 0);
+  ASSERT_FALSE(a.name().empty());
+  // No credentials at all: 401, exactly.
+  EXPECT_EQ(RtspRequestStatus(rtsp_port_, "ANNOUNCE", a.ingest_url(), kSdp), 401);
+  // A wrong password, and another session's valid credentials: ffmpeg is refused.
+  v1::Session wrong = a;
+  wrong.mutable_publish_credentials()->set_password("0123456789abcdef0123456789abcdef");
+  EXPECT_NE(Publish(PublishUrl(wrong))->Wait(std::chrono::seconds(10)), 0);
+  v1::Session borrowed = a;
+  *borrowed.mutable_publish_credentials() = other.publish_credentials();
+  EXPECT_NE(Publish(PublishUrl(borrowed))->Wait(std::chrono::seconds(10)), 0);
+  auto untouched = client_->GetSession(a.name());
+  ASSERT_TRUE(untouched.ok());
+  EXPECT_EQ(untouched->state(), v1::Session::CREATED);
+  EXPECT_EQ(untouched->stats().frames(), 0);
+  // The right credentials still work after the refusals.
+  auto cam = Publish(PublishUrl(a));
+  EXPECT_EQ(cam->Wait(std::chrono::seconds(20)), 0);
+  const v1::StateChange end = WatchToEnd(a.name());
+  EXPECT_EQ(end.state(), v1::Session::FINISHED) << end.message();
+  EXPECT_EQ(client_->GetSession(a.name())->stats().frames(), offline_[0].frames);
+}
+
+TEST_F(RtspPushTest, UnknownPathIs404AndADeletedSessionsPathToo) {
+  const std::string base = "rtsp://127.0.0.1:" + std::to_string(rtsp_port_);
+  EXPECT_EQ(RtspRequestStatus(rtsp_port_, "ANNOUNCE", base + "/sessions/nosuchsession/cam", kSdp),
+            404);
+  EXPECT_EQ(RtspRequestStatus(rtsp_port_, "ANNOUNCE", base + "/cam", kSdp), 404);
+  const v1::Session a = Create("cam", 0);
+  ASSERT_FALSE(a.name().empty());
+  EXPECT_EQ(RtspRequestStatus(rtsp_port_, "ANNOUNCE", a.ingest_url(), kSdp), 401);
+  ASSERT_TRUE(client_->DeleteSession(a.name()).ok());
+  // Unmounted by the session's end (the worker unwinds within moments).
+  int status = 0;
+  for (int i = 0; i < 100 && status != 404; ++i) {
+    status = RtspRequestStatus(rtsp_port_, "ANNOUNCE", a.ingest_url(), kSdp);
+    if (status != 404) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  EXPECT_EQ(status, 404);
+}
+
+TEST_F(RtspPushTest, ASecondPublisherIsRefusedAndTheFirstGoesOn) {
+  const v1::Session a = Create("cam", 0);
+  ASSERT_FALSE(a.name().empty());
+  auto first = Publish(PublishUrl(a), 0);
+  ASSERT_GE(WaitForFrames(a.name(), 10), 10);
+  auto second = Publish(PublishUrl(a), 1);
+  EXPECT_NE(second->Wait(std::chrono::seconds(10)), 0);
+  EXPECT_EQ(first->Wait(std::chrono::seconds(20)), 0);
+  const v1::StateChange end = WatchToEnd(a.name());
+  EXPECT_EQ(end.state(), v1::Session::FINISHED) << end.message();
+  ExpectEqualsOffline(a.name(), offline_[0]);  // the second publisher's frames never mixed in
+}
+
+TEST_F(RtspPushTest, AKilledPublisherIsALostCameraNotAnEnd) {
+  const v1::Session a = Create("cam", 0);
+  ASSERT_FALSE(a.name().empty());
+  auto cam = Publish(PublishUrl(a), 0);
+  ASSERT_GE(WaitForFrames(a.name(), 10), 10);
+  cam->Kill();  // SIGKILL: the TCP connection closes without TEARDOWN
+  const v1::StateChange end = WatchToEnd(a.name());
+  EXPECT_EQ(end.state(), v1::Session::FAILED) << end.message();
+  auto got = client_->GetSession(a.name());
+  ASSERT_TRUE(got.ok());
+  EXPECT_EQ(got->error().code(), static_cast<int>(StatusCode::kUnavailable));
+  EXPECT_NE(got->error().message().find("lost without a TEARDOWN"), std::string::npos)
+      << got->error().message();
+}
+
+TEST_F(RtspPushTest, NoPublisherIsDeadlineExceeded) {
+  v1::Session request;
+  request.mutable_rtsp_push()->set_path("nobody");
+  request.mutable_rtsp_push()->set_start_timeout_ms(300);
+  *request.mutable_intrinsics() = api::IntrinsicsToProto(drives_[0].intrinsics);
+  auto created = client_->CreateSession(request);
+  ASSERT_TRUE(created.ok()) << created.status().ToString();
+  const v1::StateChange end = WatchToEnd(created->name());
+  EXPECT_EQ(end.state(), v1::Session::FAILED);
+  EXPECT_EQ(client_->GetSession(created->name())->error().code(),
+            static_cast<int>(StatusCode::kDeadlineExceeded));
+}
+
+// The RTSP port taken: the server does not start, and says which flag moves it.
+TEST_F(RtspPushTest, ATakenRtspPortIsUnavailable) {
+  server::ServerOptions o;
+  o.port = 0;
+  o.sessions.rtsp_port = rtsp_port_;  // this fixture's server has it
+  auto second = SlapseServer::Start(o);
+  ASSERT_FALSE(second.ok());
+  EXPECT_EQ(second.status().code(), StatusCode::kUnavailable);
+  EXPECT_NE(second.status().message().find("--rtsp-port"), std::string::npos)
+      << second.status().message();
+}
+
+// The credentials derive from the data directory's key: the same after a
+// restart, different for another key.
+TEST(RtspIngestKeyTest, TheKeyFilePersistsAndInMemoryKeysDiffer) {
+  const std::string dir = testing::MakeTempDir("rtsp_ingest_key");
+  auto k1 = server::LoadOrCreateRtspIngestKey(dir);
+  auto k2 = server::LoadOrCreateRtspIngestKey(dir);
+  ASSERT_TRUE(k1.ok()) << k1.status().ToString();
+  ASSERT_TRUE(k2.ok());
+  EXPECT_EQ(*k1, *k2);
+  EXPECT_EQ(k1->size(), 32u);
+  auto m1 = server::LoadOrCreateRtspIngestKey(server::kInMemoryDataDir);
+  auto m2 = server::LoadOrCreateRtspIngestKey(server::kInMemoryDataDir);
+  ASSERT_TRUE(m1.ok() && m2.ok());
+  EXPECT_NE(*m1, *m2);
+}
+
+}  // namespace
+}  // namespace slapse
