@@ -1,4 +1,4 @@
-#include "lab/viz/mv_overlay.h"
+#include "core/viz/mv_overlay.h"
 
 #include <cstdio>
 
