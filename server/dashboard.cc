@@ -415,6 +415,7 @@ HttpResponse Dashboard::Overlay(const HttpRequest& r) const {
   HttpResponse res{200, "image/png", std::move(png->png)};
   res.headers.emplace_back("Cache-Control", "no-store");
   res.headers.emplace_back("X-Slapse-Frame", std::to_string(png->frame_index));
+  res.headers.emplace_back("X-Slapse-Count", std::to_string(png->count));
   return res;
 }
 

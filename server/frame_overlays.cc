@@ -21,7 +21,8 @@ int64_t SteadyNowNs() {
 // `picture` scaled down (area averaging) to at most `max_width_px` wide, as
 // a PNG with the fastest compression (the pictures are mostly a photo: a
 // higher level costs several times the time for a few per cent).
-StatusOr<OverlayPng> Encode(const cv::Mat& picture, int max_width_px, int64_t frame_index) {
+StatusOr<OverlayPng> Encode(const cv::Mat& picture, int max_width_px, int64_t frame_index,
+                            int count) {
   cv::Mat scaled = picture;
   if (max_width_px > 0 && picture.cols > max_width_px) {
     const double f = static_cast<double>(max_width_px) / picture.cols;
@@ -34,6 +35,7 @@ StatusOr<OverlayPng> Encode(const cv::Mat& picture, int max_width_px, int64_t fr
   OverlayPng out;
   out.png.assign(bytes.begin(), bytes.end());
   out.frame_index = frame_index;
+  out.count = count;
   out.width_px = scaled.cols;
   out.height_px = scaled.rows;
   return out;
@@ -126,7 +128,8 @@ StatusOr<OverlayPng> FrameOverlays::Png(OverlayKind kind, int max_width_px) {
   if (mv) frame.luma = l;  // DrawMotionVectors reads the record's own
   const cv::Mat picture = mv ? DrawMotionVectors(frame, width, height)
                              : DrawPlanes(l, width, height, earlier, later, planes);
-  auto png = Encode(picture, max_width_px, mv ? frame.index : later);
+  auto png = Encode(picture, max_width_px, mv ? frame.index : later,
+                    static_cast<int>(mv ? frame.mvs.size() : planes.size()));
   if (!png.ok()) return png.status();
   std::lock_guard<std::mutex> lock(mu_);
   Cached& cached = mv ? mv_cache_ : planes_cache_;

@@ -38,6 +38,7 @@ StatusOr<OverlayKind> ParseOverlayKind(const std::string& text);
 struct OverlayPng {
   std::string png;           // the encoded picture
   int64_t frame_index = -1;  // the anchor it shows (session timeline)
+  int count = 0;             // what it draws: vectors (mv) or planes (planes)
   int width_px = 0, height_px = 0;
 };
 

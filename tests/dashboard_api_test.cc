@@ -335,6 +335,7 @@ TEST_F(DashboardApiTest, OverlaysShowTheNewestAnchorOnceSomeoneAsks) {
   EXPECT_EQ(mv_picture.cols, std::min(width, 640));
   EXPECT_EQ(mv_picture.rows, std::min(width, 640) * height / width);
   EXPECT_GT(ColouredPixels(mv_picture), 200) << "arrows drawn";
+  EXPECT_GT(std::stoi(mv->get_header_value("X-Slapse-Count")), 50) << "vectors of a P frame";
   cv::Scalar mean, stddev;
   cv::meanStdDev(mv_picture, mean, stddev);
   EXPECT_GT(stddev[1], 10.0) << "the frame's picture, not the grey of a missing luma";
@@ -359,7 +360,13 @@ TEST_F(DashboardApiTest, OverlaysShowTheNewestAnchorOnceSomeoneAsks) {
   std::printf("overlays: mv frame %lld (%d coloured px), planes frame %lld (%d coloured px)\n",
               static_cast<long long>(mv_frame), ColouredPixels(mv_picture),
               static_cast<long long>(planes_frame), ColouredPixels(planes_picture));
-  EXPECT_GT(ColouredPixels(planes_picture), 20) << "plane dots drawn";
+  // Dots exactly when the pair had planes (the caption's white text aside).
+  const int planes_drawn = std::stoi(planes->get_header_value("X-Slapse-Count"));
+  if (planes_drawn > 0) {
+    EXPECT_GT(ColouredPixels(planes_picture), 20 * planes_drawn) << "plane dots drawn";
+  } else {
+    EXPECT_EQ(ColouredPixels(planes_picture), 0) << "no planes, no dots";
+  }
 
   // A session nobody asked about keeps nothing.
   const std::string other = FinishedUpload(a_.get());

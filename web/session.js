@@ -183,11 +183,14 @@ async function loadOverlay(kind) {
     return;
   }
   const frame = res.headers.get('X-Slapse-Frame');
+  const count = Number(res.headers.get('X-Slapse-Count'));
+  const what = kind === 'mv' ? `${count} motion vectors` : `${count} plane${count === 1 ? '' : 's'}`;
   const url = URL.createObjectURL(await res.blob());
   img.onload = () => {
     const m = metrics.overlays[kind];
     m.loads += 1;
     m.frames.push(Number(frame));
+    m.counts = [...(m.counts || []), count];
     m.naturalWidth = img.naturalWidth;
     if (img.dataset.url) URL.revokeObjectURL(img.dataset.url);
     img.dataset.url = url;
@@ -195,8 +198,10 @@ async function loadOverlay(kind) {
   img.src = url;
   img.hidden = false;
   img.dataset.frame = frame;
-  img.alt = kind === 'mv' ? `Motion vectors of frame ${frame}` : `Planes extracted on the anchor pair ending at frame ${frame}`;
-  note.textContent = `frame ${frame}`;
+  img.alt = kind === 'mv'
+    ? `Motion vectors of frame ${frame}: ${what}`
+    : `Planes extracted on the anchor pair ending at frame ${frame}: ${what}`;
+  note.textContent = `frame ${frame}, ${what}`;
 }
 
 function refreshOverlays() {
