@@ -175,7 +175,12 @@ function onEvent(msg) {
 async function loadOverlay(kind) {
   const img = document.getElementById(`overlay-${kind}`);
   const note = document.getElementById(`overlay-${kind}-note`);
-  const res = await fetch(`/api/overlay?${new URLSearchParams({ name, kind })}`, { credentials: 'same-origin' });
+  // As wide as the picture is shown (device pixels), so nothing is drawn in vain.
+  const shown = Math.round((img.clientWidth || img.parentElement.clientWidth) * (window.devicePixelRatio || 1));
+  const width = String(Math.min(1280, Math.max(160, shown)));
+  const res = await fetch(`/api/overlay?${new URLSearchParams({ name, kind, max_width_px: width })}`, {
+    credentials: 'same-origin',
+  });
   if (!res.ok) {
     if (res.status === 401) window.location.assign('/');
     const body = await res.json().catch(() => ({}));
