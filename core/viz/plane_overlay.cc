@@ -37,9 +37,9 @@ cv::Mat DrawPlanes(const std::vector<uint8_t>& luma, int width_px, int height_px
     }
   }
   char text[128];
-  std::snprintf(text, sizeof(text), "anchors %lld -> %lld  %zu planes",
+  std::snprintf(text, sizeof(text), "anchors %lld -> %lld  %zu plane%s",
                 static_cast<long long>(earlier_index), static_cast<long long>(later_index),
-                planes.size());
+                planes.size(), planes.size() == 1 ? "" : "s");
   cv::putText(out, text, cv::Point(8, 20), cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 0, 0), 3,
               cv::LINE_AA);
   cv::putText(out, text, cv::Point(8, 20), cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(255, 255, 255),
