@@ -9,7 +9,8 @@
 //    last `kWantedFor` (Wanted()); otherwise it costs one atomic load per
 //    anchor;
 //  - kept is the newest anchor only (its luma moved, not copied, and its
-//    vectors), replaced at each anchor;
+//    vectors), replaced at each anchor; when the session's run ends it is
+//    dropped unless a page was watching then (the last pictures stay);
 //  - pictures are drawn on the HTTP thread, on request, at most once per
 //    anchor and kind (the PNG is cached until the next anchor), scaled down
 //    to at most `max_width_px`.

@@ -80,6 +80,14 @@ void SessionRunner::EndStream(const Status& status) {
 // connects again after an outage while its policy allows.
 void SessionRunner::Run() {
   LogSessionScope log_scope(session_->name);  // FFmpeg's records name the session
+  // An ended session keeps its last frame for the overlays only if a page
+  // was watching then (until the session is deleted).
+  struct DropOverlays {
+    FrameOverlays* overlays;
+    ~DropOverlays() {
+      if (!overlays->Wanted()) overlays->Clear();
+    }
+  } drop_overlays{session_->overlays.get()};
   if (session_->stop) return EndStream(CancelledError("stopped"));
   for (;;) {
     SetDeadline(source_->start_timeout_ms());

@@ -184,7 +184,9 @@ async function loadOverlay(kind) {
   if (!res.ok) {
     if (res.status === 401) window.location.assign('/');
     const body = await res.json().catch(() => ({}));
-    note.textContent = body.message || `HTTP ${res.status}`;
+    note.textContent = res.status === 503 && session && TERMINAL.has(session.state)
+      ? 'none: frames are kept only while a page watches a running session'
+      : body.message || `HTTP ${res.status}`;
     return;
   }
   const frame = res.headers.get('X-Slapse-Frame');
