@@ -21,6 +21,9 @@ constexpr int kDownloadPage = 10000;
 // Events per SSE read, and how long one read waits before a keep-alive.
 constexpr size_t kEventBatch = 256;
 constexpr auto kEventPoll = std::chrono::milliseconds(500);
+// Overlay pictures: default and largest width, px.
+constexpr int kOverlayWidth = 640;
+constexpr int kOverlayMaxWidth = 4096;
 
 std::string ToJson(const google::protobuf::Message& message) {
   google::protobuf::util::JsonPrintOptions o;
@@ -131,7 +134,8 @@ StatusOr<double> DoubleParam(const HttpRequest& r, const std::string& name) {
 
 class Dashboard {
  public:
-  Dashboard(SessionManager* sessions, Authenticator* auth) : sessions_(sessions), auth_(auth) {}
+  Dashboard(SessionManager* sessions, Authenticator* auth, bool https)
+      : sessions_(sessions), auth_(auth), https_(https) {}
 
   SessionManager* sessions() const { return sessions_; }
   bool AuthOn() const { return auth_ != nullptr && auth_->enabled(); }
@@ -148,10 +152,12 @@ class Dashboard {
   HttpResponse Planes(const HttpRequest& r) const;
   HttpResponse Download(const HttpRequest& r) const;
   HttpResponse Events(const HttpRequest& r) const;
+  HttpResponse Overlay(const HttpRequest& r) const;
 
  private:
   SessionManager* const sessions_;
   Authenticator* const auth_;
+  const bool https_;  // the login cookie is then Secure
 };
 
 const WebAsset* FindAsset(const std::string& path) {
@@ -167,7 +173,7 @@ HttpResponse AssetResponse(const WebAsset& a, int status = 200) {
   r.headers.emplace_back("Cache-Control", "no-cache");
   r.headers.emplace_back("X-Content-Type-Options", "nosniff");
   r.headers.emplace_back("Content-Security-Policy",
-                         "default-src 'self'; img-src 'self' data:; frame-ancestors 'none'");
+                         "default-src 'self'; img-src 'self' data: blob:; frame-ancestors 'none'");
   return r;
 }
 
@@ -216,7 +222,8 @@ HttpResponse Dashboard::Login(const HttpRequest& r) const {
   HttpResponse ok{303, "text/plain; charset=utf-8", "signed in\n"};
   ok.headers.emplace_back("Location", "/");
   ok.headers.emplace_back("Set-Cookie", std::string(kTokenCookie) + "=" + token +
-                                            "; Path=/; HttpOnly; SameSite=Strict");
+                                            "; Path=/; HttpOnly; SameSite=Strict" +
+                                            (https_ ? "; Secure" : ""));
   return ok;
 }
 
@@ -391,6 +398,27 @@ HttpResponse Dashboard::Events(const HttpRequest& r) const {
   return res;
 }
 
+HttpResponse Dashboard::Overlay(const HttpRequest& r) const {
+  if (auto c = AuthorizeSession(r); !c.ok()) return ErrorResponse(c.status());
+  auto kind = ParseOverlayKind(r.Param("kind"));
+  if (!kind.ok()) return ErrorResponse(kind.status());
+  auto width = IntParam(r, "max_width_px", kOverlayWidth);
+  if (!width.ok()) return ErrorResponse(width.status());
+  if (*width < 16 || *width > kOverlayMaxWidth) {
+    return ErrorResponse(InvalidArgumentError("query parameter 'max_width_px' must be in [16, " +
+                                              std::to_string(kOverlayMaxWidth) + "]"));
+  }
+  auto overlays = sessions_->Overlays(r.Param("name"));
+  if (!overlays.ok()) return ErrorResponse(overlays.status());
+  auto png = (*overlays)->Png(*kind, static_cast<int>(*width));
+  if (!png.ok()) return ErrorResponse(png.status());
+  HttpResponse res{200, "image/png", std::move(png->png)};
+  res.headers.emplace_back("Cache-Control", "no-store");
+  res.headers.emplace_back("X-Slapse-Frame", std::to_string(png->frame_index));
+  res.headers.emplace_back("X-Slapse-Count", std::to_string(png->count));
+  return res;
+}
+
 // The routes; their handlers share `d`.
 void Mount(const std::shared_ptr<const Dashboard>& d, HttpServer* http) {
   http->Get("/", [d](const HttpRequest& r) { return d->Page(r, "index.html"); });
@@ -421,6 +449,7 @@ void Mount(const std::shared_ptr<const Dashboard>& d, HttpServer* http) {
   http->Get("/api/planes", [d](const HttpRequest& r) { return d->Planes(r); });
   http->Get("/api/download", [d](const HttpRequest& r) { return d->Download(r); });
   http->Get("/api/events", [d](const HttpRequest& r) { return d->Events(r); });
+  http->Get("/api/overlay", [d](const HttpRequest& r) { return d->Overlay(r); });
   http->Post("/api/stop", [d](const HttpRequest& r) {
     if (auto c = d->AuthorizeSession(r, "StopSession"); !c.ok()) return ErrorResponse(c.status());
     auto s = d->sessions()->Stop(r.Param("name"));
@@ -437,7 +466,7 @@ void Mount(const std::shared_ptr<const Dashboard>& d, HttpServer* http) {
 }  // namespace
 
 void MountDashboard(HttpServer* http, SessionManager* sessions, Authenticator* auth) {
-  Mount(std::make_shared<const Dashboard>(sessions, auth), http);
+  Mount(std::make_shared<const Dashboard>(sessions, auth, http->tls()), http);
 }
 
 }  // namespace slapse::server

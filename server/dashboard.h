@@ -28,6 +28,13 @@
 //                                Last-Event-ID (or `after`) is the cursor, so
 //                                nothing is lost or repeated. `event: end` when
 //                                the log has ended.
+//   GET  /api/overlay?name=&kind=mv|planes&max_width_px=
+//                                image/png: the newest anchor frame's motion
+//                                vectors, or the latest pair's planes, over
+//                                its picture (server/frame_overlays.h; frames
+//                                are kept only while someone asks: 503 until
+//                                the next anchor); X-Slapse-Frame: its index,
+//                                X-Slapse-Count: the vectors / planes drawn
 //
 // JSON is protobuf's JSON mapping of the v1 messages (proto field names,
 // defaults printed; int64 as strings); an error is an ErrorStatus

@@ -51,7 +51,14 @@ std::string HttpRequest::Param(const std::string& name) const {
   return it == params.end() ? "" : it->second;
 }
 
-HttpServer::HttpServer() : server_(std::make_unique<httplib::Server>()) {
+HttpServer::HttpServer(const HttpTls& tls) : tls_(tls.on()) {
+  if (tls_) {
+    server_ = std::make_unique<httplib::SSLServer>(
+        tls.cert_file.c_str(), tls.key_file.c_str(),
+        tls.client_ca_file.empty() ? nullptr : tls.client_ca_file.c_str());
+  } else {
+    server_ = std::make_unique<httplib::Server>();
+  }
   server_->new_task_queue = [] { return new httplib::ThreadPool(kHttpThreads); };
   // httplib's default also sets SO_REUSEPORT, which lets a second server bind
   // the same port and take half the scrapes: address reuse only (restarts).
@@ -90,6 +97,11 @@ void HttpServer::Post(const std::string& path, HttpHandler handler) {
 Status HttpServer::Start(const std::string& address, int port) {
   if (port < 0 || port > 65535) {
     return InvalidArgumentError("HTTP port must be in [0, 65535], got " + std::to_string(port));
+  }
+  if (!server_->is_valid()) {
+    return InvalidArgumentError(
+        "HTTPS: cannot use the TLS certificate / key (or client CA) files: unreadable, not PEM, or "
+        "the key does not match the certificate");
   }
   if (port == 0) {
     port_ = server_->bind_to_any_port(address);

@@ -11,6 +11,9 @@
 //   ...
 //   http.Stop();
 //
+// With HttpTls files it speaks HTTPS only (httplib's SSLServer, OpenSSL): the
+// slapse server gives it the gRPC port's certificate, key and client CA.
+//
 // Unknown paths get 404, other methods 405 (httplib's defaults). Handlers
 // run on a pool of kHttpThreads threads; a streamed response holds one for
 // as long as it streams.
@@ -73,9 +76,16 @@ using HttpHandler = std::function<HttpResponse(const HttpRequest&)>;
 
 constexpr int kHttpThreads = 32;
 
+// PEM files (as AuthOptions' for the gRPC port); no certificate: plain HTTP.
+struct HttpTls {
+  std::string cert_file, key_file;
+  std::string client_ca_file;  // set: clients must present a certificate it signed
+  bool on() const { return !cert_file.empty(); }
+};
+
 class HttpServer {
  public:
-  HttpServer();
+  explicit HttpServer(const HttpTls& tls = {});
   // Stops if still serving.
   ~HttpServer();
   HttpServer(const HttpServer&) = delete;
@@ -90,6 +100,8 @@ class HttpServer {
   // UNAVAILABLE if the address cannot be bound.
   Status Start(const std::string& address, int port);
   int port() const { return port_; }
+  // Whether it speaks HTTPS.
+  bool tls() const { return tls_; }
 
   // Stops serving and joins the thread. Idempotent.
   void Stop();
@@ -99,6 +111,7 @@ class HttpServer {
   std::unique_ptr<httplib::Server> server_;
   std::thread thread_;
   int port_ = 0;
+  bool tls_ = false;
 };
 
 }  // namespace slapse::server

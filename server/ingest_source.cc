@@ -28,6 +28,9 @@ std::unique_ptr<IngestSource> IngestSource::Make(const v1::Session& request,
       break;
   }
   source->reader_options_ = api::StreamOptionsFromProto(request.stream_options());
+  // The dashboard's overlays draw over the anchors' luma (server/frame_overlays.h;
+  // the runner keeps an anchor's only while someone asks, and drops the rest).
+  source->reader_options_.keep_luma = true;
   return source;
 }
 

@@ -73,7 +73,9 @@ static Status CheckClusterOptions(const ServerOptions& options) {
 
 Status SlapseServer::StartHttp() {
   if (options_.http_port == 0) return Status::Ok();
-  http_ = std::make_unique<HttpServer>();
+  // The HTTP port speaks TLS when the gRPC port does (same files).
+  http_ = std::make_unique<HttpServer>(HttpTls{
+      options_.auth.tls_cert_file, options_.auth.tls_key_file, options_.auth.tls_client_ca_file});
   http_->Get("/metrics", [this](const HttpRequest&) {
     return HttpResponse{200, kPrometheusContentType, metrics_->Exposition()};
   });

@@ -24,6 +24,7 @@
 
 #include "core/common/status.h"
 #include "server/event_log.h"
+#include "server/frame_overlays.h"
 #include "server/store.h"
 #include "server/upload_queue.h"
 #include "slapse/v1/slapse.pb.h"
@@ -54,6 +55,8 @@ class Session {
   std::shared_ptr<UploadQueue> upload;
   std::atomic<bool> stop{false};
   std::condition_variable stop_cv;  // with `mu`: wakes a reconnect wait on stop
+  // The newest anchor frame as pictures for the dashboard (own lock).
+  const std::shared_ptr<FrameOverlays> overlays = std::make_shared<FrameOverlays>();
 
   mutable std::mutex mu;  // guards everything below
   v1::Session proto;      // state, stats, error, times (last_sequence filled on read)

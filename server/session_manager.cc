@@ -344,6 +344,12 @@ StatusOr<std::shared_ptr<EventLog>> SessionManager::Events(const std::string& na
   return (*s)->events;
 }
 
+StatusOr<std::shared_ptr<FrameOverlays>> SessionManager::Overlays(const std::string& name) const {
+  auto s = Find(name);
+  if (!s.ok()) return s.status();
+  return (*s)->overlays;
+}
+
 namespace {
 
 // Points in one unpaged GetTrajectory (below the 4 MiB message limit), and

@@ -120,6 +120,8 @@ class SessionManager {
   // outlives a Delete of its session, so a watcher still drains to the final
   // StateChange. NOT_FOUND if unknown.
   StatusOr<std::shared_ptr<EventLog>> Events(const std::string& name) const;
+  // A session's latest-frame overlays (server/frame_overlays.h). NOT_FOUND if unknown.
+  StatusOr<std::shared_ptr<FrameOverlays>> Overlays(const std::string& name) const;
 
   // Snapshots, a page at a time (see GetTrajectoryRequest). FAILED_PRECONDITION
   // for an EXPIRED session.

@@ -81,6 +81,14 @@ void SessionRunner::EndStream(const Status& status) {
 // connects again after an outage while its policy allows.
 void SessionRunner::Run() {
   LogSessionScope log_scope(session_->name);  // FFmpeg's records name the session
+  // An ended session keeps its last frame for the overlays only if a page
+  // was watching then (until the session is deleted).
+  struct DropOverlays {
+    FrameOverlays* overlays;
+    ~DropOverlays() {
+      if (!overlays->Wanted()) overlays->Clear();
+    }
+  } drop_overlays{session_->overlays.get()};
   if (session_->stop) return EndStream(CancelledError("stopped"));
   for (;;) {
     SetDeadline(source_->start_timeout_ms());
@@ -120,7 +128,7 @@ bool SessionRunner::RunConnection(MvReader* reader, ConnectionEnd* end) {
     if (end->frames == 1 && source_->network()) {
       session_->Transition(v1::Session::RUNNING, Status::Ok(), "receiving the stream");
     }
-    if (!Feed(frame)) return false;
+    if (!Feed(std::move(frame))) return false;
   }
 }
 
@@ -211,6 +219,8 @@ bool SessionRunner::MakePipeline(const StreamInfo& info) {
     k.height_px = info.height_px;
   }
   pipeline_.emplace(k, info.mv_sigma_px(), options);
+  width_px_ = k.width_px;
+  height_px_ = k.height_px;
   first_info_ = info;
   start_ = Clock::now();
   return true;
@@ -233,8 +243,17 @@ bool SessionRunner::Feed(FrameRecord frame) {
     EndStream(step.status());
     return false;
   }
-  Publish(frame, step->has_value() ? &**step : nullptr);
+  const PipelineStep* done = step->has_value() ? &**step : nullptr;
+  Publish(frame, done);
+  KeepForOverlays(std::move(frame), done);
   return true;
+}
+
+void SessionRunner::KeepForOverlays(FrameRecord frame, const PipelineStep* step) {
+  FrameOverlays& overlays = *session_->overlays;
+  if (!overlays.Wanted()) return overlays.Clear();
+  if (IsAnchor(frame.type)) overlays.SetAnchor(std::move(frame), width_px_, height_px_);
+  if (step != nullptr) overlays.SetPlanes(step->earlier_index, step->later_index, step->extracted);
 }
 
 void SessionRunner::Publish(const FrameRecord& frame, const PipelineStep* step) {

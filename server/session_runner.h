@@ -53,6 +53,9 @@ class SessionRunner {
   // publishes the result; false if the session ended.
   bool Feed(FrameRecord frame);
   void Publish(const FrameRecord& frame, const PipelineStep* step);
+  // The dashboard's overlays (server/frame_overlays.h): an anchor frame and
+  // the step's planes, kept only while someone asks for them.
+  void KeepForOverlays(FrameRecord frame, const PipelineStep* step);
   // Why the session has no poses yet, after `step` (null: a frame that
   // closed no pair). Called before the step is counted.
   std::string NoPoseReason(const PipelineStep* step) const;
@@ -83,8 +86,9 @@ class SessionRunner {
   int64_t last_index_ = -1;        // of the last frame processed (offset)
   double last_timestamp_s_ = 0.0;  // of the last frame processed (offset)
   Clock::time_point last_frame_wall_;
-  int64_t segment_points_ = 0;     // trajectory points of this run's pipeline
-  int64_t last_point_index_ = -1;  // frame index of the last trajectory point stored
+  int64_t segment_points_ = 0;        // trajectory points of this run's pipeline
+  int64_t last_point_index_ = -1;     // frame index of the last trajectory point stored
+  int width_px_ = 0, height_px_ = 0;  // the pipeline's image size (the overlays')
 };
 
 }  // namespace slapse::server

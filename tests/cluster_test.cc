@@ -168,6 +168,7 @@ class ClusterTest : public ::testing::Test {
                                  "--address",        "127.0.0.1",
                                  "--port",           std::to_string(ports_[i]),
                                  "--http-port",      "0",
+                                 "--rtsp-port",      "0",  // 8554 would collide
                                  "--data-dir",       dir_ + "/data-" + ids_[i],
                                  "--max-sessions",   "4",
                                  "--replica-id",     ids_[i],

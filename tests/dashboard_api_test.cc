@@ -14,8 +14,12 @@
 #include "client/lib/client.h"
 #include "core/common/json_io.h"
 #include "server/server.h"
+#include "slapse/v1/slapse.pb.h"
 #include "tests/server_fixture.h"
 #include "tests/test_streams.h"
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 // Last: httplib.h includes <resolv.h>, whose `_res` macro breaks Eigen's headers.
 #include <httplib.h>
@@ -110,7 +114,7 @@ TEST_F(DashboardApiTest, NothingWithoutATokenAndNoSessionAcrossTenants) {
   for (const std::string& path : std::vector<std::string>{
            "/api/sessions", "/api/session?name=" + Q(a), "/api/trajectory?name=" + Q(a),
            "/api/planes?name=" + Q(a), "/api/download?format=tum&name=" + Q(a),
-           "/api/events?name=" + Q(a)}) {
+           "/api/events?name=" + Q(a), "/api/overlay?kind=mv&name=" + Q(a)}) {
     auto r = Get(path);
     ASSERT_TRUE(r);
     EXPECT_EQ(r->status, 401) << path;
@@ -128,8 +132,9 @@ TEST_F(DashboardApiTest, NothingWithoutATokenAndNoSessionAcrossTenants) {
   ASSERT_EQ(list->status, 200) << list->body;
   EXPECT_NE(list->body.find(a), std::string::npos);
   EXPECT_EQ(list->body.find(b), std::string::npos);
-  for (const std::string path : {"/api/session?name=", "/api/trajectory?name=", "/api/planes?name=",
-                                 "/api/events?name=", "/api/download?format=tum&name="}) {
+  for (const std::string path :
+       {"/api/session?name=", "/api/trajectory?name=", "/api/planes?name=", "/api/events?name=",
+        "/api/download?format=tum&name=", "/api/overlay?kind=planes&name="}) {
     auto other = Get(path + Q(b), kTokenA);
     EXPECT_EQ(other->status, 404) << path << other->body;
     auto unknown = Get(path + Q("sessions/aaaaaaaaaaaaaaaaaaaaaaaaaa"), kTokenA);
@@ -269,6 +274,106 @@ TEST_F(DashboardApiTest, EventsResumeAfterLastEventIdWithNothingLostOrRepeated) 
   EXPECT_EQ(ReadEvents(server_->http_port(), a, resume), "HTTP error");
 }
 
+// Pixels of `picture` (BGR) whose channels differ by more than 100: the
+// overlays' colours (red / blue arrows, plane dots), never the grey frame.
+int ColouredPixels(const cv::Mat& picture) {
+  int n = 0;
+  for (int r = 0; r < picture.rows; ++r) {
+    for (int c = 0; c < picture.cols; ++c) {
+      const cv::Vec3b p = picture.at<cv::Vec3b>(r, c);
+      const int hi = std::max({p[0], p[1], p[2]}), lo = std::min({p[0], p[1], p[2]});
+      n += hi - lo > 100;
+    }
+  }
+  return n;
+}
+
+TEST_F(DashboardApiTest, OverlaysShowTheNewestAnchorOnceSomeoneAsks) {
+  v1::Session r;
+  r.mutable_upload();
+  *r.mutable_intrinsics() = api::IntrinsicsToProto(drive_->intrinsics);
+  auto s = a_->CreateSession(r);
+  ASSERT_TRUE(s.ok()) << s.status().ToString();
+  const std::string q = "&name=" + Q(s->name());
+  // Nothing is kept before anyone asks: 503 says why; asking makes the
+  // runner keep the anchors from now on.
+  auto early = Get("/api/overlay?kind=mv" + q, kTokenA);
+  ASSERT_TRUE(early);
+  EXPECT_EQ(early->status, 503) << early->body;
+  EXPECT_NE(early->body.find("no frame kept yet"), std::string::npos) << early->body;
+  // Bad parameters are 400 naming them.
+  auto bad_kind = Get("/api/overlay?kind=depth" + q, kTokenA);
+  EXPECT_EQ(bad_kind->status, 400);
+  EXPECT_NE(bad_kind->body.find("'kind' must be mv or planes"), std::string::npos)
+      << bad_kind->body;
+  auto bad_width = Get("/api/overlay?kind=mv&max_width_px=2" + q, kTokenA);
+  EXPECT_EQ(bad_width->status, 400);
+  EXPECT_NE(bad_width->body.find("max_width_px"), std::string::npos) << bad_width->body;
+
+  ASSERT_TRUE(a_->UploadFile(s->name(), drive_->video_path).ok());
+  v1::Session done;
+  for (int i = 0; i < 600 && done.state() != v1::Session::FINISHED; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    if (auto got = a_->GetSession(s->name()); got.ok()) done = *got;
+  }
+  ASSERT_EQ(done.state(), v1::Session::FINISHED) << done.state_message();
+  ASSERT_GT(done.stats().planes(), 0);
+  const int width = drive_->intrinsics.width_px, height = drive_->intrinsics.height_px;
+  ASSERT_GT(width, 0);
+
+  // The MV picture: the newest anchor with vectors, at the stream's size
+  // (narrower than the default 640 px), the frame's luma behind red arrows.
+  auto mv = Get("/api/overlay?kind=mv" + q, kTokenA);
+  ASSERT_EQ(mv->status, 200) << mv->body;
+  EXPECT_EQ(mv->get_header_value("Content-Type"), "image/png");
+  const int64_t mv_frame = std::stoll(mv->get_header_value("X-Slapse-Frame"));
+  EXPECT_GT(mv_frame, done.stats().frames() - 12) << "one of the last frames";
+  EXPECT_LT(mv_frame, done.stats().frames());
+  const cv::Mat mv_picture =
+      cv::imdecode(std::vector<uchar>(mv->body.begin(), mv->body.end()), cv::IMREAD_COLOR);
+  ASSERT_FALSE(mv_picture.empty());
+  EXPECT_EQ(mv_picture.cols, std::min(width, 640));
+  EXPECT_EQ(mv_picture.rows, std::min(width, 640) * height / width);
+  EXPECT_GT(ColouredPixels(mv_picture), 200) << "arrows drawn";
+  EXPECT_GT(std::stoi(mv->get_header_value("X-Slapse-Count")), 50) << "vectors of a P frame";
+  cv::Scalar mean, stddev;
+  cv::meanStdDev(mv_picture, mean, stddev);
+  EXPECT_GT(stddev[1], 10.0) << "the frame's picture, not the grey of a missing luma";
+  // Smaller on request.
+  auto small = Get("/api/overlay?kind=mv&max_width_px=160" + q, kTokenA);
+  ASSERT_EQ(small->status, 200);
+  const cv::Mat small_picture =
+      cv::imdecode(std::vector<uchar>(small->body.begin(), small->body.end()), cv::IMREAD_COLOR);
+  EXPECT_EQ(small_picture.cols, 160);
+  EXPECT_EQ(small->get_header_value("X-Slapse-Frame"), mv->get_header_value("X-Slapse-Frame"));
+
+  // The planes picture: the last anchor pair's later anchor, an anchor of
+  // the trajectory, with coloured dots when that pair had planes.
+  auto planes = Get("/api/overlay?kind=planes" + q, kTokenA);
+  ASSERT_EQ(planes->status, 200) << planes->body;
+  const int64_t planes_frame = std::stoll(planes->get_header_value("X-Slapse-Frame"));
+  EXPECT_GE(planes_frame, mv_frame);
+  const cv::Mat planes_picture =
+      cv::imdecode(std::vector<uchar>(planes->body.begin(), planes->body.end()), cv::IMREAD_COLOR);
+  ASSERT_FALSE(planes_picture.empty());
+  EXPECT_EQ(planes_picture.cols, mv_picture.cols);
+  std::printf("overlays: mv frame %lld (%d coloured px), planes frame %lld (%d coloured px)\n",
+              static_cast<long long>(mv_frame), ColouredPixels(mv_picture),
+              static_cast<long long>(planes_frame), ColouredPixels(planes_picture));
+  // Dots exactly when the pair had planes (the caption's white text aside).
+  const int planes_drawn = std::stoi(planes->get_header_value("X-Slapse-Count"));
+  if (planes_drawn > 0) {
+    EXPECT_GT(ColouredPixels(planes_picture), 20 * planes_drawn) << "plane dots drawn";
+  } else {
+    EXPECT_EQ(ColouredPixels(planes_picture), 0) << "no planes, no dots";
+  }
+
+  // A session nobody asked about keeps nothing.
+  const std::string other = FinishedUpload(a_.get());
+  auto none = Get("/api/overlay?kind=mv&name=" + Q(other), kTokenA);
+  EXPECT_EQ(none->status, 503) << none->body;
+}
+
 TEST_F(DashboardApiTest, CameraCredentialsNeverLeave) {
   v1::Session r;
   r.mutable_rtsp_pull()->set_url(std::string("rtsp://admin:") + kSecret + "@127.0.0.1:9/cam");
@@ -289,6 +394,55 @@ TEST_F(DashboardApiTest, CameraCredentialsNeverLeave) {
   const std::string events = ReadEvents(server_->http_port(), s->name(), auth);
   EXPECT_NE(events.find("event: end"), std::string::npos) << events;
   EXPECT_EQ(events.find(kSecret), std::string::npos) << events;
+}
+
+// With the gRPC port's certificate and key the HTTP port speaks HTTPS only
+// (a certificate the test makes with openssl): the dashboard and /metrics
+// over TLS, verified against that certificate; plain HTTP gets nothing; the
+// login cookie is Secure.
+TEST(DashboardHttpsTest, TheHttpPortSpeaksTlsWithTheGrpcCertificate) {
+  const std::string dir = testing::MakeTempDir("dashboard_https");
+  const std::string cert = dir + "/server.pem", key = dir + "/server.key";
+  ASSERT_EQ(
+      testing::RunCommand("openssl req -x509 -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 "
+                          "-nodes -days 2 -subj /CN=localhost -addext "
+                          "subjectAltName=IP:127.0.0.1,DNS:localhost -keyout " +
+                          key + " -out " + cert + " >/dev/null 2>&1"),
+      0);
+  testing::WriteFileBytes(dir + "/tokens.json", std::string("{\"tokens\": [{\"token\": \"") +
+                                                    kTokenA + "\", \"tenant\": \"acme\"}]}");
+  server::ServerOptions o;
+  o.port = 0;
+  o.http_port = server::ServerOptions::kAnyFreePort;
+  o.auth.tls_cert_file = cert;
+  o.auth.tls_key_file = key;
+  o.auth.tokens_file = dir + "/tokens.json";
+  o.shutdown_grace_s = 1;
+  auto server = server::SlapseServer::Start(o);
+  ASSERT_TRUE(server.ok()) << server.status().ToString();
+  const int port = (*server)->http_port();
+
+  httplib::SSLClient https("127.0.0.1", port);
+  https.set_ca_cert_path(cert.c_str());
+  https.enable_server_certificate_verification(true);
+  auto health = https.Get("/healthz");
+  ASSERT_TRUE(health) << httplib::to_string(health.error());
+  EXPECT_EQ(health->status, 200);
+  EXPECT_EQ(https.Get("/api/sessions")->status, 401);
+  auto list = https.Get("/api/sessions", {{"Authorization", std::string("Bearer ") + kTokenA}});
+  ASSERT_TRUE(list);
+  EXPECT_EQ(list->status, 200) << list->body;
+  auto login = https.Post("/login", httplib::Params{{"token", kTokenA}});
+  ASSERT_TRUE(login);
+  EXPECT_NE(login->get_header_value("Set-Cookie").find("; Secure"), std::string::npos)
+      << login->get_header_value("Set-Cookie");
+
+  // Plain HTTP on the same port: no response.
+  httplib::Client plain("127.0.0.1", port);
+  plain.set_read_timeout(5, 0);
+  auto refused = plain.Get("/healthz");
+  EXPECT_FALSE(refused && refused->status == 200);
+  (*server)->Shutdown();
 }
 
 }  // namespace

@@ -2,8 +2,12 @@
 // live RTSP push camera (ffmpeg) and a finished upload, and Debian's headless
 // Chromium driven by playwright-core (tests/web/dashboard.mjs): fleet rows and
 // states, the filter box, sorting by keyboard, a session's trajectory growing
-// live over server-sent events, downloads, stop and delete from the page. Screenshots go
-// to the test's temp dir; load time and update latency are printed.
+// live over server-sent events, the newest frame's MV and plane overlays
+// loading and updating, the event stream cut and resumed from Last-Event-ID,
+// downloads, stop and delete from the page; and with tokens on, the login
+// form (a wrong token refused, the right one showing its tenant's sessions
+// only). Screenshots go to the test's temp dir; load time and update latency
+// are printed.
 #include <gtest/gtest.h>
 
 #include <array>
@@ -35,6 +39,14 @@ int RunCapture(const std::string& command, std::string* out) {
   return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
 }
 
+// Ensures tests/web/node_modules holds playwright-core (npm ci from the lockfile).
+void NpmCi(const std::string& web_dir) {
+  if (std::filesystem::exists(web_dir + "/node_modules/playwright-core")) return;
+  std::string log;
+  ASSERT_EQ(RunCapture("npm ci --no-audit --no-fund --prefix '" + web_dir + "' 2>&1", &log), 0)
+      << log;
+}
+
 // Polls `name` until its state is terminal (bounded).
 v1::Session WaitEnded(client::SlapseClient* client, const std::string& name) {
   v1::Session s;
@@ -50,11 +62,7 @@ v1::Session WaitEnded(client::SlapseClient* client, const std::string& name) {
 
 TEST(DashboardTest, BrowserShowsTheFleetALiveSessionAndStopsIt) {
   const std::string web_dir = SLAPSE_WEB_TEST_DIR;
-  if (!std::filesystem::exists(web_dir + "/node_modules/playwright-core")) {
-    std::string log;
-    ASSERT_EQ(RunCapture("npm ci --no-audit --no-fund --prefix '" + web_dir + "' 2>&1", &log), 0)
-        << log;
-  }
+  NpmCi(web_dir);
   auto drive =
       testing::SimulateTestDrive("dashboard_test_drive", testing::SmallMpeg2DriveOptions(3, 6.0));
   ASSERT_TRUE(drive.ok()) << drive.status().ToString();
@@ -121,6 +129,52 @@ TEST(DashboardTest, BrowserShowsTheFleetALiveSessionAndStopsIt) {
   EXPECT_EQ(stopped.state(), v1::Session::STOPPED) << stopped.state_message();
   EXPECT_GT(stopped.stats().frames(), 10);
   EXPECT_EQ(client->GetSession(upload->name()).status().code(), StatusCode::kNotFound);
+  (*server)->Shutdown();
+}
+
+TEST(DashboardTest, LoginFormRefusesAWrongTokenAndShowsOnlyTheTenantsSessions) {
+  const std::string web_dir = SLAPSE_WEB_TEST_DIR;
+  NpmCi(web_dir);
+  auto drive =
+      testing::SimulateTestDrive("dashboard_login_drive", testing::SmallMpeg2DriveOptions(4, 2.0));
+  ASSERT_TRUE(drive.ok()) << drive.status().ToString();
+  const std::string dir = testing::MakeTempDir("dashboard_login");
+  const std::string token_a = "token-of-acme-0123456789", token_b = "token-of-globex-0123456789";
+  testing::WriteFileBytes(dir + "/tokens.json", "{\"tokens\": [{\"token\": \"" + token_a +
+                                                    "\", \"tenant\": \"acme\"}, {\"token\": \"" +
+                                                    token_b + "\", \"tenant\": \"globex\"}]}");
+  server::ServerOptions o;
+  o.port = 0;
+  o.http_port = server::ServerOptions::kAnyFreePort;
+  o.auth.tokens_file = dir + "/tokens.json";
+  o.shutdown_grace_s = 1;
+  auto server = server::SlapseServer::Start(o);
+  ASSERT_TRUE(server.ok()) << server.status().ToString();
+  const std::string target = "127.0.0.1:" + std::to_string((*server)->port());
+  std::string names[2];
+  for (int i = 0; i < 2; ++i) {
+    client::ClientOptions co = testing::TestClientOptions();
+    co.token = i == 0 ? token_a : token_b;
+    auto client = client::SlapseClient::Connect(target, co);
+    v1::Session request;
+    request.mutable_upload();
+    *request.mutable_intrinsics() = api::IntrinsicsToProto(drive->intrinsics);
+    auto s = client->CreateSession(request);
+    ASSERT_TRUE(s.ok()) << s.status().ToString();
+    ASSERT_TRUE(client->UploadFile(s->name(), drive->video_path).ok());
+    ASSERT_EQ(WaitEnded(client.get(), s->name()).state(), v1::Session::FINISHED);
+    names[i] = s->name();
+  }
+  const std::string out_dir = testing::MakeTempDir("dashboard_login_screens");
+  const std::string args =
+      "{\"mode\": \"auth\", \"url\": \"http://127.0.0.1:" + std::to_string((*server)->http_port()) +
+      "\", \"token\": \"" + token_a + "\", \"mine\": \"" + names[0] + "\", \"theirs\": \"" +
+      names[1] + "\", \"out\": \"" + out_dir + "\"}";
+  std::string measured;
+  const int rc = RunCapture("node '" + web_dir + "/dashboard.mjs' '" + args + "'", &measured);
+  ASSERT_EQ(rc, 0) << "the browser run failed (its stderr is above)";
+  std::printf("login scenario: %s", measured.c_str());
+  EXPECT_NE(measured.find("\"rows\""), std::string::npos) << measured;
   (*server)->Shutdown();
 }
 

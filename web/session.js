@@ -7,6 +7,8 @@ import { drawSeries, drawSide, drawTopDown } from './draw.js';
 
 const STATS_MS = 2000;
 const PLANES_MS = 1000;
+const OVERLAY_MS = 1000;
+const OVERLAYS = ['mv', 'planes'];
 const name = new URLSearchParams(window.location.search).get('name') || '';
 const points = new Map();  // frame index -> {t, x, y, z, kind, segment, revision}
 const stats = { fps: [], lag: [], tracked: [] };
@@ -17,7 +19,16 @@ let session = null;
 let source = null;
 let drawPending = false;
 let planeTimer = null;
-const metrics = (window.slapseMetrics = { events: 0, latenciesMs: [], points: 0, lastSequence: 0 });
+const metrics = (window.slapseMetrics = {
+  events: 0,
+  latenciesMs: [],
+  points: 0,
+  lastSequence: 0,
+  sequences: [],  // every event's sequence, in arrival order
+  opens: 0,  // event-stream connections opened (a reconnect adds one)
+  overlays: { mv: { loads: 0, frames: [] }, planes: { loads: 0, frames: [] } },
+});
+let overlayEvents = -1;  // metrics.events when the overlays were last fetched
 
 function status(text, error = false) {
   const s = document.getElementById('status');
@@ -143,6 +154,7 @@ function onEvent(msg) {
   const e = JSON.parse(msg.data);
   metrics.events += 1;
   metrics.lastSequence = num(e.sequence);
+  metrics.sequences.push(metrics.lastSequence);
   if (e.pose) {
     if (e.pose.emit_time) metrics.latenciesMs.push(Date.now() - timeMs(e.pose.emit_time));
     metric = e.pose.metric;
@@ -155,6 +167,55 @@ function onEvent(msg) {
   } else if (e.reconnecting) {
     status(`reconnecting (attempt ${e.reconnecting.attempt}): ${e.reconnecting.reason}`);
   }
+}
+
+// The newest anchor frame's overlays (GET /api/overlay, PNG): fetched while
+// the page is visible, when events came since the last fetch (the server
+// keeps frames only while someone asks, and draws each anchor once).
+async function loadOverlay(kind) {
+  const img = document.getElementById(`overlay-${kind}`);
+  const note = document.getElementById(`overlay-${kind}-note`);
+  // As wide as the picture is shown (device pixels), so nothing is drawn in vain.
+  const shown = Math.round((img.clientWidth || img.parentElement.clientWidth) * (window.devicePixelRatio || 1));
+  const width = String(Math.min(1280, Math.max(160, shown)));
+  const res = await fetch(`/api/overlay?${new URLSearchParams({ name, kind, max_width_px: width })}`, {
+    credentials: 'same-origin',
+  });
+  if (!res.ok) {
+    if (res.status === 401) window.location.assign('/');
+    const body = await res.json().catch(() => ({}));
+    note.textContent = res.status === 503 && session && TERMINAL.has(session.state)
+      ? 'none: frames are kept only while a page watches a running session'
+      : body.message || `HTTP ${res.status}`;
+    return;
+  }
+  const frame = res.headers.get('X-Slapse-Frame');
+  const count = Number(res.headers.get('X-Slapse-Count'));
+  const what = kind === 'mv' ? `${count} motion vectors` : `${count} plane${count === 1 ? '' : 's'}`;
+  const url = URL.createObjectURL(await res.blob());
+  img.onload = () => {
+    const m = metrics.overlays[kind];
+    m.loads += 1;
+    m.frames.push(Number(frame));
+    m.counts = [...(m.counts || []), count];
+    m.naturalWidth = img.naturalWidth;
+    if (img.dataset.url) URL.revokeObjectURL(img.dataset.url);
+    img.dataset.url = url;
+  };
+  img.src = url;
+  img.hidden = false;
+  img.dataset.frame = frame;
+  img.alt = kind === 'mv'
+    ? `Motion vectors of frame ${frame}: ${what}`
+    : `Planes extracted on the anchor pair ending at frame ${frame}: ${what}`;
+  note.textContent = `frame ${frame}, ${what}`;
+}
+
+function refreshOverlays() {
+  if (document.visibilityState !== 'visible' || metrics.events === overlayEvents) return;
+  if (session && TERMINAL.has(session.state) && overlayEvents >= 0) return;
+  overlayEvents = metrics.events;
+  for (const kind of OVERLAYS) loadOverlay(kind).catch((e) => status(e.message, true));
 }
 
 function watch(after) {
@@ -173,7 +234,13 @@ function watch(after) {
     source.close();
     status(JSON.parse(m.data).message, true);
   });
-  source.onopen = () => status('live');
+  source.onopen = () => {
+    metrics.opens += 1;
+    status('live');
+  };
+  source.onerror = () => {
+    if (source.readyState === EventSource.CONNECTING) status('connection lost; reconnecting…');
+  };
 }
 
 async function refreshSession() {
@@ -224,6 +291,8 @@ async function main() {
     await refreshSession();
     const [cursor] = await Promise.all([loadTrajectory(), loadPlanes()]);
     watch(cursor);
+    refreshOverlays();
+    setInterval(refreshOverlays, OVERLAY_MS);
     setInterval(() => {
       if (session && !TERMINAL.has(session.state)) refreshSession();
     }, STATS_MS);

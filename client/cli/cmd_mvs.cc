@@ -14,7 +14,7 @@
 #include "client/cli/flags.h"
 #include "core/common/json_io.h"
 #include "core/mv/mv_reader.h"
-#include "lab/viz/mv_overlay.h"
+#include "core/viz/mv_overlay.h"
 
 namespace slapse::cli {
 namespace {

@@ -16,9 +16,9 @@
 #include "core/pipeline/front_end.h"
 #include "core/planes/infinity.h"
 #include "core/planes/plane_extraction.h"
+#include "core/viz/plane_overlay.h"
 #include "lab/eval/extraction_eval.h"
 #include "lab/sim/simulate.h"
-#include "lab/viz/plane_overlay.h"
 
 namespace slapse::cli {
 namespace {
@@ -130,7 +130,8 @@ int RunPlanes(int argc, char** argv) {
     const AnchorPair& pair = step->pair;
     const std::vector<ExtractedPlane> planes =
         step->extraction.ok() ? step->extraction->planes : std::vector<ExtractedPlane>();
-    const cv::Mat picture = DrawPlanes(f.luma, info.width_px, info.height_px, pair, planes);
+    const cv::Mat picture = DrawPlanes(f.luma, info.width_px, info.height_px, pair.earlier_index,
+                                       pair.later_index, planes);
     if (!cv::imwrite(png, picture)) {
       return Fail("planes", "cannot write " + png);
     }

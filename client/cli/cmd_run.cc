@@ -17,11 +17,11 @@
 #include "core/mv/mv_reader.h"
 #include "core/pipeline/pipeline.h"
 #include "core/pipeline/result_io.h"
+#include "core/viz/plane_overlay.h"
 #include "lab/eval/frame_pose_eval.h"
 #include "lab/eval/plane_map_eval.h"
 #include "lab/eval/trajectory_eval.h"
 #include "lab/gt/ground_truth.h"
-#include "lab/viz/plane_overlay.h"
 #include "lab/viz/top_down_plot.h"
 
 namespace slapse::cli {

@@ -162,7 +162,8 @@ int RunServe(int argc, char** argv) {
       ->type_name("S")
       ->capture_default_str();
   app.add_option("--tls-cert", o.auth.tls_cert_file,
-                 "server certificate chain (PEM); with --tls-key the server speaks TLS only")
+                 "server certificate chain (PEM); with --tls-key the server speaks TLS only "
+                 "(gRPC, and HTTPS on --http-port)")
       ->type_name("FILE");
   app.add_option("--tls-key", o.auth.tls_key_file, "the certificate's private key (PEM)")
       ->type_name("FILE");
@@ -183,7 +184,8 @@ int RunServe(int argc, char** argv) {
                "port can read, stop and delete every session)");
   int64_t http_port = 8080;  // the CLI's fixed, documented port (docs/DEPLOY.md)
   app.add_option("--http-port", http_port,
-                 "HTTP port for /metrics (Prometheus) and /healthz, same address (0: off)")
+                 "HTTP port for /metrics (Prometheus), /healthz and the dashboard, same address "
+                 "(0: off; HTTPS with --tls-cert)")
       ->type_name("PORT")
       ->capture_default_str();
   app.add_flag("--reflection,!--no-reflection", o.reflection,

@@ -1,6 +1,7 @@
-#include "lab/viz/mv_overlay.h"
+#include "core/viz/mv_overlay.h"
 
 #include <cstdio>
+#include <utility>
 
 #include <opencv2/imgproc.hpp>
 
@@ -27,14 +28,18 @@ cv::Mat DrawMotionVectors(const FrameRecord& frame, int width_px, int height_px,
     }
   }
   if (options.caption) {
+    // Two short lines, so that they fit a 320-pixel-wide frame.
     char text[128];
-    std::snprintf(text, sizeof(text), "frame %lld  %c  %zu MVs  (red: past, blue: future)",
+    std::snprintf(text, sizeof(text), "frame %lld  %c  %zu MVs",
                   static_cast<long long>(frame.index), PictureTypeChar(frame.type),
                   frame.mvs.size());
-    cv::putText(out, text, cv::Point(8, 20), cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 0, 0), 3,
-                cv::LINE_AA);
-    cv::putText(out, text, cv::Point(8, 20), cv::FONT_HERSHEY_SIMPLEX, 0.5,
-                cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
+    const char* key = "red: past, blue: future";
+    for (const auto& [line, y] : {std::pair<const char*, int>{text, 20}, {key, 40}}) {
+      cv::putText(out, line, cv::Point(8, y), cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 0, 0), 3,
+                  cv::LINE_AA);
+      cv::putText(out, line, cv::Point(8, y), cv::FONT_HERSHEY_SIMPLEX, 0.5,
+                  cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
+    }
   }
   return out;
 }
