@@ -548,19 +548,6 @@ TEST(BindTest, TheCliServesLoopbackByDefaultAndRefusesAnUnprotectedPublicAddress
 
 // --- secrets never leave ------------------------------------------------------------
 
-// A TCP port on 127.0.0.1 that nobody listens on.
-int ClosedTcpPort() {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in sa{};
-  sa.sin_family = AF_INET;
-  sa.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t len = sizeof(sa);
-  bind(fd, reinterpret_cast<sockaddr*>(&sa), sizeof(sa));
-  getsockname(fd, reinterpret_cast<sockaddr*>(&sa), &len);
-  close(fd);
-  return ntohs(sa.sin_port);
-}
-
 std::string Text(const google::protobuf::Message& m) { return m.DebugString(); }
 
 TEST(SecretsTest, APlantedSecretAppearsInNoOutput) {
@@ -580,7 +567,7 @@ TEST(SecretsTest, APlantedSecretAppearsInNoOutput) {
   auto c = SlapseClient::Connect(address, o);
   std::string outputs;  // everything that left the server or the CLI
   const std::string url = "rtsp://admin:" + kPassword +
-                          "@127.0.0.1:" + std::to_string(ClosedTcpPort()) +
+                          "@127.0.0.1:" + std::to_string(testing::FreeLoopbackTcpPort()) +
                           "/cam?token=" + kQueryToken + "&ch=1";
   v1::Session r = UploadRequest();
   r.clear_upload();

@@ -37,46 +37,12 @@ namespace slapse {
 namespace {
 
 using client::SlapseClient;
-using testing::ChildProcess;
 using testing::TestClientOptions;
 
 constexpr int kReplicas = 3;
 constexpr int kSessions = 6;
 const char* const kToken = "acme-token-0123456789abcdef";
 const char* const kOtherToken = "globex-token-0123456789abcdef";
-
-int FreeTcpPort() {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in sa{};
-  sa.sin_family = AF_INET;
-  sa.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t len = sizeof(sa);
-  int port = 0;
-  if (bind(fd, reinterpret_cast<sockaddr*>(&sa), sizeof(sa)) == 0 &&
-      getsockname(fd, reinterpret_cast<sockaddr*>(&sa), &len) == 0) {
-    port = ntohs(sa.sin_port);
-  }
-  close(fd);
-  return port;
-}
-
-// A child running argv[0] with `argv`, stdout and stderr appended to `log`.
-class Process : public ChildProcess {
- public:
-  Process(std::vector<std::string> argv, const std::string& log) {
-    std::vector<char*> c;
-    for (std::string& a : argv) c.push_back(a.data());
-    c.push_back(nullptr);
-    pid_ = fork();
-    if (pid_ == 0) {
-      const int out = open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-      dup2(out, 1);
-      dup2(out, 2);
-      execv(c[0], c.data());
-      _exit(127);
-    }
-  }
-};
 
 // Runs `command` and returns its stdout ("" on failure).
 std::string Capture(const std::string& command) {
@@ -133,13 +99,13 @@ class ClusterTest : public ::testing::Test {
         << R"({"token": ")" << kOtherToken << R"(", "tenant": "globex"}]})";
     std::string replicas, peers;
     for (int i = 0; i < kReplicas; ++i) {
-      ports_.push_back(FreeTcpPort());
+      ports_.push_back(testing::FreeLoopbackTcpPort());
       ids_.push_back("slapse-" + std::to_string(i));
       replicas += " " + ids_[i] + "=127.0.0.1:" + std::to_string(ports_[i]);
       peers += (i ? "," : "") + Address(i);
     }
     peers_ = peers;
-    proxy_port_ = FreeTcpPort();
+    proxy_port_ = testing::FreeLoopbackTcpPort();
     const std::string cfg = Capture(std::string(SLAPSE_HAPROXY_CFG) +
                                     " --bind 127.0.0.1:" + std::to_string(proxy_port_) + replicas);
     ASSERT_FALSE(cfg.empty()) << "haproxy-cfg.sh failed";
@@ -149,7 +115,7 @@ class ClusterTest : public ::testing::Test {
         0)
         << "haproxy -c rejects " << dir_ << "/haproxy.cfg";
     for (int i = 0; i < kReplicas; ++i) replicas_.push_back(Serve(i));
-    proxy_ = std::make_unique<Process>(
+    proxy_ = std::make_unique<testing::LoggedProcess>(
         std::vector<std::string>{SLAPSE_HAPROXY, "-db", "-f", dir_ + "/haproxy.cfg"},
         dir_ + "/haproxy.log");
     client_ = SlapseClient::Connect(ProxyAddress(), WithToken(kToken));
@@ -162,8 +128,8 @@ class ClusterTest : public ::testing::Test {
   std::string Address(int i) const { return "127.0.0.1:" + std::to_string(ports_[i]); }
   std::string ProxyAddress() const { return "127.0.0.1:" + std::to_string(proxy_port_); }
 
-  std::unique_ptr<Process> Serve(int i) {
-    return std::make_unique<Process>(
+  std::unique_ptr<testing::LoggedProcess> Serve(int i) {
+    return std::make_unique<testing::LoggedProcess>(
         std::vector<std::string>{SLAPSE_CLI,         "serve",
                                  "--address",        "127.0.0.1",
                                  "--port",           std::to_string(ports_[i]),
@@ -217,8 +183,8 @@ class ClusterTest : public ::testing::Test {
   std::vector<std::string> ids_;
   std::string peers_;
   int proxy_port_ = 0;
-  std::vector<std::unique_ptr<Process>> replicas_;
-  std::unique_ptr<Process> proxy_;
+  std::vector<std::unique_ptr<testing::LoggedProcess>> replicas_;
+  std::unique_ptr<testing::LoggedProcess> proxy_;
   std::unique_ptr<SlapseClient> client_;
 };
 

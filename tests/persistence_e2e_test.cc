@@ -32,51 +32,21 @@ namespace slapse {
 namespace {
 
 using client::SlapseClient;
-using testing::ChildProcess;
 using testing::FfmpegProcess;
 using testing::PortOf;
 using testing::TestClientOptions;
 using testing::WaitForLocalPort;
 
-int FreeTcpPort() {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in sa{};
-  sa.sin_family = AF_INET;
-  sa.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t len = sizeof(sa);
-  int port = 0;
-  if (bind(fd, reinterpret_cast<sockaddr*>(&sa), sizeof(sa)) == 0 &&
-      getsockname(fd, reinterpret_cast<sockaddr*>(&sa), &len) == 0) {
-    port = ntohs(sa.sin_port);
-  }
-  close(fd);
-  return port;
-}
-
 // `slapse serve` on 127.0.0.1:port with `data_dir`; its output in `log`.
-class ServeProcess : public ChildProcess {
+class ServeProcess : public testing::LoggedProcess {
  public:
-  ServeProcess(int port, const std::string& data_dir, const std::string& log) {
-    std::vector<std::string> argv = {
-        SLAPSE_CLI,           "serve",      "--address", "127.0.0.1",      "--port",
-        std::to_string(port), "--data-dir", data_dir,    "--max-sessions", "4",
-        "--http-port",        "0",   // no HTTP: 8080 may be another test's
-        "--rtsp-port",        "0"};  // a free RTSP ingest port: 8554 may be another test's
-    std::vector<char*> c;
-    for (std::string& a : argv) c.push_back(a.data());
-    c.push_back(nullptr);
-    pid_ = fork();
-    if (pid_ == 0) {
-      const int out = open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-      dup2(out, 1);
-      dup2(out, 2);
-      execv(SLAPSE_CLI, c.data());
-      _exit(127);
-    }
-  }
-  void Signal(int sig) {
-    if (pid_ > 0) kill(pid_, sig);
-  }
+  ServeProcess(int port, const std::string& data_dir, const std::string& log)
+      : LoggedProcess({SLAPSE_CLI, "serve", "--address", "127.0.0.1", "--port",
+                       std::to_string(port), "--data-dir", data_dir, "--max-sessions", "4",
+                       // no HTTP and a free RTSP ingest port: 8080 and 8554 may be
+                       // another test's
+                       "--http-port", "0", "--rtsp-port", "0"},
+                      log) {}
 };
 
 // True once the server answers (bounded).
@@ -124,7 +94,7 @@ class PersistenceTest : public ::testing::Test {
         testing::SimulateTestDrive("persistence_drive", testing::SmallMpeg2DriveOptions(3, 2.0));
     ASSERT_TRUE(drive.ok()) << drive.status().ToString();
     drive_ = *drive;
-    port_ = FreeTcpPort();
+    port_ = testing::FreeLoopbackTcpPort();
     ASSERT_GT(port_, 0);
   }
 

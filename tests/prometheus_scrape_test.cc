@@ -26,22 +26,6 @@
 namespace slapse {
 namespace {
 
-// A free TCP port on 127.0.0.1 (bound, read, released).
-int FreeTcpPort() {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t len = sizeof a;
-  int port = 0;
-  if (bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
-      getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) == 0) {
-    port = ntohs(a.sin_port);
-  }
-  close(fd);
-  return port;
-}
-
 class PrometheusProcess : public testing::ChildProcess {
  public:
   PrometheusProcess(const std::string& dir, int web_port) {
@@ -100,7 +84,7 @@ TEST(PrometheusScrapeTest, PrometheusScrapesSlapseMetrics) {
                           "    static_configs:\n"
                           "      - targets: ['127.0.0.1:" +
                               std::to_string((*server)->http_port()) + "']\n");
-  const int web_port = FreeTcpPort();
+  const int web_port = testing::FreeLoopbackTcpPort();
   ASSERT_GT(web_port, 0);
   PrometheusProcess prometheus(dir, web_port);
   ASSERT_TRUE(prometheus.started());

@@ -82,22 +82,6 @@ class RtspServerProcess : public testing::ChildProcess {
   int port_ = 0;
 };
 
-// A TCP port on 127.0.0.1 that nothing listens on (bound, then released).
-int ClosedTcpPort() {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in sa{};
-  sa.sin_family = AF_INET;
-  sa.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t len = sizeof(sa);
-  int port = 0;
-  if (bind(fd, reinterpret_cast<sockaddr*>(&sa), sizeof(sa)) == 0 &&
-      getsockname(fd, reinterpret_cast<sockaddr*>(&sa), &len) == 0) {
-    port = ntohs(sa.sin_port);
-  }
-  close(fd);
-  return port;
-}
-
 class RtspPullTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
@@ -235,7 +219,7 @@ TEST_F(RtspPullTest, PullsASimulatedDriveToFinished) {
 // Connection refused on every attempt: two retries after 200 and 400 ms, then
 // FAILED with UNAVAILABLE naming the URL (without its password) and the error.
 TEST_F(RtspPullTest, UnreachableCameraFailsUnavailableAfterTheBackoff) {
-  const int port = ClosedTcpPort();
+  const int port = testing::FreeLoopbackTcpPort();
   ASSERT_GT(port, 0);
   const std::string url = "rtsp://viewer:secret@127.0.0.1:" + std::to_string(port) + "/cam";
   v1::Session request = PullRequest(url);
@@ -414,7 +398,7 @@ TEST_F(RtspPullTest, StopAndDeleteDuringABackoffWaitArePrompt) {
   auto one = StartServer(1);
   ASSERT_NE(one, nullptr);
   client_ = Connect(*one);
-  const int port = ClosedTcpPort();
+  const int port = testing::FreeLoopbackTcpPort();
   ASSERT_GT(port, 0);
   v1::Session request = PullRequest("rtsp://127.0.0.1:" + std::to_string(port) + "/cam");
   SetPolicy(&request, 5, 20000, 1.0, 20000);

@@ -8,9 +8,9 @@
 
 #include <opencv2/core.hpp>
 
-#include "lab/codec/video_encoder.h"
 #include "core/common/camera.h"
 #include "core/common/status.h"
+#include "lab/codec/video_encoder.h"
 #include "lab/sim/simulate.h"
 
 namespace slapse::testing {
@@ -72,5 +72,18 @@ class ChildProcess {
  protected:
   pid_t pid_ = -1;
 };
+
+// A child running argv[0] with `argv`, its stdout and stderr appended to
+// `log` (e.g. `slapse serve` in a test).
+class LoggedProcess : public ChildProcess {
+ public:
+  LoggedProcess(std::vector<std::string> argv, const std::string& log);
+  void Signal(int sig);
+};
+
+// A TCP port on 127.0.0.1 that nothing listens on (bound, then released; the
+// kernel does not hand it out again right away): for a server the test starts,
+// or a camera that is not there.
+int FreeLoopbackTcpPort();
 
 }  // namespace slapse::testing
