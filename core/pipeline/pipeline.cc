@@ -59,6 +59,10 @@ StatusOr<std::optional<PipelineStep>> Pipeline::Push(const FrameRecord& frame) {
 void Pipeline::Break() {
   front_end_.Reset();
   frame_poser_.Reset();
+  ResetFilter();
+}
+
+void Pipeline::ResetFilter() {
   ekf_ = PlaneEkf(intrinsics_, options_.ekf);
   refiner_.Reset();
 }
@@ -199,8 +203,7 @@ void Pipeline::Advance(const std::vector<PlaneObservation>& observations, double
     // Numerical failure: restart the filter on a later pair; the trajectory
     // continues from the last pose at the last step's speed (InitialStepLength).
     step->note = "filter reset: " + s.ToString();
-    ekf_ = PlaneEkf(intrinsics_, options_.ekf);
-    refiner_.Reset();
+    ResetFilter();
     return;
   }
   world_from_cam_ = world_from_cam_ * ekf_.prev_from_cur();
@@ -414,8 +417,7 @@ void Pipeline::RestartOnNonFinite(const Rigid3d& world_from_cam_before, Pipeline
   step->tracking = false;
   step->extracted_filter_ids.clear();
   step->note = "filter reset: the motion estimate was not finite";
-  ekf_ = PlaneEkf(intrinsics_, options_.ekf);
-  refiner_.Reset();
+  ResetFilter();
 }
 
 bool Pipeline::ScaleMayChange() const {

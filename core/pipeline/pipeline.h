@@ -203,6 +203,8 @@ class Pipeline {
   // The first step's length when the filter starts: on re-initialisation the
   // last step's speed times dt_s, else from the scale source (may set metric_).
   double InitialStepLength(double dt_s);
+  // A new filter and an empty window: the next usable pair re-initialises.
+  void ResetFilter();
   static bool IsFinite(const Rigid3d& pose);
   // A step whose pose came out non-finite (a numerical failure the filter or
   // refiner did not report) does not track: the pose goes back to
