@@ -18,23 +18,13 @@
 #include <string>
 #include <vector>
 
+#include "bench/rss.h"
 #include "core/mv/mv_reader.h"
 #include "core/pipeline/pipeline.h"
 #include "lab/gt/ground_truth.h"
 #include "lab/sim/simulate.h"
 
-namespace {
-
-long RssKb() {
-  std::ifstream in("/proc/self/status");
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.rfind("VmRSS:", 0) == 0) return std::atol(line.c_str() + 6);
-  }
-  return -1;
-}
-
-}  // namespace
+namespace {}  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app("pipeline_memory: a pipeline's memory over a long stream");
@@ -94,7 +84,8 @@ int main(int argc, char** argv) {
     if ((loop + 1) % std::max(1L, loops / 10) == 0 || loop + 1 == loops) {
       std::printf("| %.2f | %zu | %zu | %zu | %zu | %.1f |\n", (loop + 1) * loop_s / 3600,
                   pipeline.poses().size(), pipeline.trajectory().size(),
-                  pipeline.plane_map().size(), pipeline.poses_forgotten(), RssKb() / 1024.0);
+                  pipeline.plane_map().size(), pipeline.poses_forgotten(),
+                  slapse::bench::RssKb() / 1024.0);
       std::fflush(stdout);
     }
   }

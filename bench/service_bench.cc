@@ -44,6 +44,7 @@ extern "C" {
 }
 
 #include "api/convert.h"
+#include "bench/rss.h"
 #include "client/lib/client.h"
 #include "core/common/intrinsics_io.h"
 #include "lab/sim/simulate.h"
@@ -60,15 +61,6 @@ google::protobuf::Timestamp Now() {
   return TimeUtil::NanosecondsToTimestamp(std::chrono::duration_cast<std::chrono::nanoseconds>(
                                               std::chrono::system_clock::now().time_since_epoch())
                                               .count());
-}
-
-long RssKb() {
-  std::ifstream in("/proc/self/status");
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.rfind("VmRSS:", 0) == 0) return std::atol(line.c_str() + 6);
-  }
-  return -1;
 }
 
 // An `ffmpeg -re` publisher of `video` to `url` (RTSP over TCP), as a child.
@@ -121,7 +113,7 @@ int RunChild(int n, const std::string& video, const slapse::Intrinsics& k, doubl
     return 1;
   }
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
-  const long idle_rss_kb = RssKb();
+  const long idle_rss_kb = slapse::bench::RssKb();
   auto client =
       slapse::client::SlapseClient::Connect("127.0.0.1:" + std::to_string((*server)->port()));
 
@@ -172,7 +164,7 @@ int RunChild(int n, const std::string& video, const slapse::Intrinsics& k, doubl
   long peak_rss_kb = idle_rss_kb;
   for (;;) {
     std::this_thread::sleep_for(std::chrono::milliseconds(250));
-    peak_rss_kb = std::max(peak_rss_kb, RssKb());
+    peak_rss_kb = std::max(peak_rss_kb, slapse::bench::RssKb());
     int active = 0;
     for (SessionOutcome& s : out) {
       auto got = client->GetSession(s.name);

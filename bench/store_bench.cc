@@ -25,6 +25,7 @@
 #include <string>
 #include <vector>
 
+#include "bench/rss.h"
 #include "client/lib/client.h"
 #include "server/server.h"
 #include "server/session.h"
@@ -39,20 +40,8 @@ double Seconds(Clock::time_point since) {
   return std::chrono::duration<double>(Clock::now() - since).count();
 }
 
-// Resident set size of this process, MiB (/proc/self/status VmRSS).
-double RssMiB() {
-  std::ifstream f("/proc/self/status");
-  std::string key;
-  while (f >> key) {
-    if (key == "VmRSS:") {
-      double kb = 0;
-      f >> kb;
-      return kb / 1024.0;
-    }
-    std::getline(f, key);
-  }
-  return 0;
-}
+// Resident set size of this process, MiB (bench/rss.h; 0 if unreadable, as before).
+double RssMiB() { return std::max(0L, slapse::bench::RssKb()) / 1024.0; }
 
 double DirMiB(const std::string& dir) {
   uintmax_t bytes = 0;
