@@ -10,7 +10,8 @@
 #   podman run --rm -v "$PWD/out:/out" slapse simulate --out /out/drive
 #
 # Ports: 50051 gRPC (slapse.v1.SlapseService, grpc.health.v1.Health, reflection),
-# 8080 HTTP (/metrics). Data: /var/lib/slapse (the SQLite session store).
+# 8080 HTTP (/metrics, dashboard), 8554 RTSP ingest, 40000-40099/udp RTP.
+# Data: /var/lib/slapse (the SQLite session store).
 
 FROM debian:12 AS build
 WORKDIR /src
@@ -59,8 +60,9 @@ RUN ldconfig && ! ldd /usr/local/bin/slapse | grep "not found" \
 USER slapse
 WORKDIR /var/lib/slapse
 VOLUME /var/lib/slapse
-# gRPC, HTTP (/metrics, dashboard), RTSP ingest of every push session (docs/DEPLOY.md)
-EXPOSE 50051 8080 8554
+# gRPC, HTTP (/metrics, dashboard), RTSP ingest of every push session, and the UDP
+# range RTP arrives on (RTP/SDP sessions, RTSP publishers over UDP; docs/DEPLOY.md)
+EXPOSE 50051 8080 8554 40000-40099/udp
 # Healthy = the gRPC health service answers SERVING for slapse.v1.SlapseService.
 HEALTHCHECK --interval=10s --timeout=3s --start-period=5s --retries=3 \
   CMD ["slapse", "health", "--server", "127.0.0.1:50051", "--service", "slapse.v1.SlapseService"]
@@ -70,4 +72,4 @@ ENTRYPOINT ["slapse"]
 # certificates and a tokens file and replace --insecure with --tls-cert/--tls-key/
 # --tokens-file (README "Secure setup").
 CMD ["serve", "--address", "0.0.0.0", "--insecure", "--port", "50051", "--http-port", "8080", \
-     "--rtsp-port", "8554", "--data-dir", "/var/lib/slapse"]
+     "--rtsp-port", "8554", "--rtp-ports", "40000-40099", "--data-dir", "/var/lib/slapse"]

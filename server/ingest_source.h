@@ -25,6 +25,7 @@
 #include "core/common/status.h"
 #include "core/mv/mv_reader.h"
 #include "server/session.h"
+#include "server/udp_ports.h"
 #include "slapse/v1/slapse.pb.h"
 
 namespace slapse::server {
@@ -102,5 +103,8 @@ std::unique_ptr<IngestSource> MakeRtpSdpSource(const v1::RtpSdp& rtp);
 // m=video line (RTP) or the next one (RTCP) cannot be bound here (in use).
 // At CreateSession and again when the session opens its receiver.
 Status CheckRtpPortsFree(const std::string& sdp);
+// RTP/SDP: INVALID_ARGUMENT naming the port and the range if the SDP's
+// m=video port or the next one lies outside `range` (serve --rtp-ports).
+Status CheckRtpPortsInRange(const std::string& sdp, const UdpPortRange& range);
 
 }  // namespace slapse::server

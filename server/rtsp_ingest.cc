@@ -170,6 +170,7 @@ struct RtspIngest::Impl {
   GstRTSPServer* server = nullptr;
   GstRTSPMountPoints* mounts = nullptr;
   GstRTSPAuth* auth = nullptr;
+  GstRTSPAddressPool* udp_pool = nullptr;  // options.rtp_ports; null = any port
   std::thread thread;
   std::mutex mu;
   std::map<std::string, Entry> by_session;  // session name -> its mount
@@ -322,6 +323,10 @@ StatusOr<std::unique_ptr<RtspIngest>> RtspIngest::Start(const RtspIngestOptions&
                                 std::to_string(options.port));
   }
   if (options.key.size() < 16) return InvalidArgumentError("the RTSP ingest key is too short");
+  const UdpPortRange& udp = options.rtp_ports;
+  if (!udp.any() && !(udp.min_port > 0 && udp.min_port < udp.max_port && udp.max_port <= 65535)) {
+    return InvalidArgumentError("RTP port range " + udp.ToString() + " is not a port range");
+  }
   std::call_once(g_gst_once, [] { gst_init(nullptr, nullptr); });
   auto impl = std::make_unique<Impl>();
   impl->options = options;
@@ -335,6 +340,15 @@ StatusOr<std::unique_ptr<RtspIngest>> RtspIngest::Start(const RtspIngestOptions&
   gst_rtsp_auth_set_supported_methods(impl->auth, GST_RTSP_AUTH_DIGEST);
   gst_rtsp_auth_set_realm(impl->auth, kRealm);
   gst_rtsp_server_set_auth(impl->server, impl->auth);
+  if (!udp.any()) {
+    // Unicast ranges (ttl 0) on the wildcard addresses: a UDP publisher's
+    // server ports are taken from them (one even RTP + RTCP pair each; a
+    // pair another program holds is skipped), released with its media.
+    impl->udp_pool = gst_rtsp_address_pool_new();
+    for (const char* any : {GST_RTSP_ADDRESS_POOL_ANY_IPV4, GST_RTSP_ADDRESS_POOL_ANY_IPV6}) {
+      gst_rtsp_address_pool_add_range(impl->udp_pool, any, any, udp.min_port, udp.max_port, 0);
+    }
+  }
   g_signal_connect(impl->server, "client-connected", G_CALLBACK(Impl::OnClientConnected),
                    impl.get());
   std::unique_ptr<RtspIngest> ingest(new RtspIngest(std::move(impl)));
@@ -389,6 +403,7 @@ RtspIngest::~RtspIngest() {
     for (auto& [name, e] : im->by_session) Impl::ReleasePublisher(&e);
   }
   g_object_unref(im->auth);
+  if (im->udp_pool != nullptr) g_object_unref(im->udp_pool);
   g_object_unref(im->mounts);
   g_object_unref(im->server);
   g_main_loop_unref(im->loop);
@@ -413,6 +428,7 @@ StatusOr<std::string> RtspIngest::Mount(const std::string& session_name, const s
   gst_rtsp_media_factory_set_launch(factory, kRecordLaunch);
   gst_rtsp_media_factory_set_transport_mode(factory, GST_RTSP_TRANSPORT_MODE_RECORD);
   gst_rtsp_media_factory_set_shared(factory, FALSE);
+  if (impl_->udp_pool != nullptr) gst_rtsp_media_factory_set_address_pool(factory, impl_->udp_pool);
   // Unpreparing sends EOS first, so the muxer flushes the last frames.
   gst_rtsp_media_factory_set_eos_shutdown(factory, TRUE);
   // The role names a GstStructure: it must start with a letter.

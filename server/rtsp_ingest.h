@@ -30,6 +30,7 @@
 #include <string>
 
 #include "core/common/status.h"
+#include "server/udp_ports.h"
 #include "server/upload_queue.h"
 
 namespace slapse::server {
@@ -43,6 +44,10 @@ struct RtspIngestOptions {
   std::string key;
   // Bytes buffered per session between the RTSP pipeline and the MvReader.
   int64_t buffer_bytes = 4 << 20;
+  // The server's UDP ports (RTP, RTCP) of a publisher that records over UDP
+  // come from this range (gst-rtsp-server's address pool); any = the
+  // kernel's choice. TCP-interleaved publishers use the RTSP port only.
+  UdpPortRange rtp_ports;
 };
 
 // A session's publish credentials (RTSP Digest authentication).

@@ -77,6 +77,7 @@ Status SessionManager::Open() {
   rtsp.port = options_.rtsp_port;
   rtsp.key = std::move(*key);
   rtsp.buffer_bytes = options_.upload_buffer_bytes;
+  rtsp.rtp_ports = options_.rtp_ports;
   auto ingest = RtspIngest::Start(rtsp);
   if (!ingest.ok()) return ingest.status();
   rtsp_ = std::move(*ingest);
@@ -169,7 +170,10 @@ int SessionManager::ActiveCountLocked() const {
 
 StatusOr<v1::Session> SessionManager::Create(const v1::Session& request) {
   SLAPSE_RETURN_IF_ERROR(api::ValidateSession(request));
-  if (request.has_rtp_sdp()) SLAPSE_RETURN_IF_ERROR(CheckRtpPortsFree(request.rtp_sdp().sdp()));
+  if (request.has_rtp_sdp()) {
+    SLAPSE_RETURN_IF_ERROR(CheckRtpPortsInRange(request.rtp_sdp().sdp(), options_.rtp_ports));
+    SLAPSE_RETURN_IF_ERROR(CheckRtpPortsFree(request.rtp_sdp().sdp()));
+  }
   std::shared_ptr<Session> s;
   {
     std::lock_guard<std::mutex> lock(mu_);

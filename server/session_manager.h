@@ -32,6 +32,7 @@
 #include "server/rtsp_ingest.h"
 #include "server/session.h"
 #include "server/store.h"
+#include "server/udp_ports.h"
 #include "server/worker_pool.h"
 #include "slapse/v1/slapse.pb.h"
 
@@ -58,6 +59,10 @@ struct SessionManagerOptions {
   // The RTSP ingest port of every push session; 0 = a free one
   // (SessionManager::rtsp_port()). `slapse serve` uses 8554.
   int rtsp_port = 0;
+  // The UDP ports RTP arrives on (server/udp_ports.h): RTP/SDP sessions'
+  // m=video ports must lie in it, and RTSP publishers recording over UDP get
+  // their server ports from it. Default: any port.
+  UdpPortRange rtp_ports;
   // Where sessions and results persist (server/store.h); kInMemoryDataDir
   // keeps them in memory only (the library's default, for tests and
   // embedding; `slapse serve` defaults to DefaultDataDir()).

@@ -14,6 +14,7 @@
 #include "server/ingest_source.h"
 
 namespace slapse::server {
+
 namespace {
 
 // The port of the SDP's m=video line (validated: 1..65535), or 0.
@@ -55,6 +56,16 @@ Status CheckRtpPortsFree(const std::string& sdp) {
                            : ""));
   }
   return Status::Ok();
+}
+
+Status CheckRtpPortsInRange(const std::string& sdp, const UdpPortRange& range) {
+  const int port = SdpVideoPort(sdp);
+  if (port <= 0 || range.any()) return Status::Ok();  // ValidateSdp has the say on the port
+  if (range.Contains(port) && range.Contains(port + 1)) return Status::Ok();
+  return InvalidArgumentError("rtp_sdp.sdp: the m=video port " + std::to_string(port) +
+                              " (RTP, and RTCP on " + std::to_string(port + 1) +
+                              ") is outside this server's RTP port range " + range.ToString() +
+                              " (serve --rtp-ports): pick an even port in it and send there");
 }
 
 namespace {

@@ -546,6 +546,15 @@ TEST(BindTest, TheCliServesLoopbackByDefaultAndRefusesAnUnprotectedPublicAddress
       << refused.Stderr();
 }
 
+// A bad --rtp-ports is a usage error naming the flag and the rule broken.
+TEST(BindTest, TheCliRefusesABadRtpPortRangeNamingTheRule) {
+  const std::string dir = testing::MakeTempDir("auth_rtp_ports");
+  ServeProcess refused(dir, {"--data-dir", dir + "/data", "--rtp-ports", "40001-40099"});
+  EXPECT_EQ(refused.Wait(std::chrono::seconds(20)), 2);
+  EXPECT_NE(refused.Stderr().find("--rtp-ports"), std::string::npos) << refused.Stderr();
+  EXPECT_NE(refused.Stderr().find("MIN must be even"), std::string::npos) << refused.Stderr();
+}
+
 // --- secrets never leave ------------------------------------------------------------
 
 std::string Text(const google::protobuf::Message& m) { return m.DebugString(); }

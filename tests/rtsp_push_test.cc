@@ -7,13 +7,20 @@
 //   - no or wrong credentials: 401 (another session's: refused too), the
 //     session untouched;
 //   - an unknown path: 404; a second publisher to a busy path: refused;
-//   - TEARDOWN ends FINISHED, a killed publisher FAILED (UNAVAILABLE, "lost").
+//   - TEARDOWN ends FINISHED, a killed publisher FAILED (UNAVAILABLE, "lost");
+//   - a publisher recording over UDP gets its server ports from --rtp-ports.
 #include <gtest/gtest.h>
+
+#include <dirent.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <fstream>
 #include <memory>
+#include <set>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -41,6 +48,42 @@ using testing::RtspRequestStatus;
 constexpr const char* kSdp =
     "v=0\r\no=- 0 0 IN IP4 127.0.0.1\r\ns=test\r\nc=IN IP4 127.0.0.1\r\nt=0 0\r\n"
     "m=video 0 RTP/AVP 32\r\na=rtpmap:32 MPV/90000\r\na=control:streamid=0\r\n";
+
+// The fixture servers' RTP port range (serve --rtp-ports). Another program
+// holding a pair in it only makes the ingest skip that pair.
+constexpr server::UdpPortRange kRtpPorts{47000, 47099};
+
+// The local UDP ports of the sockets this process holds (the in-process
+// server's): the inodes of /proc/self/fd's sockets, looked up in
+// /proc/self/net/udp and udp6 (columns: sl local_address:port(hex) ... inode).
+std::set<int> OwnUdpPorts() {
+  std::set<std::string> inodes;
+  if (DIR* dir = opendir("/proc/self/fd")) {
+    while (dirent* e = readdir(dir)) {
+      char target[256];
+      const std::string path = std::string("/proc/self/fd/") + e->d_name;
+      const ssize_t n = readlink(path.c_str(), target, sizeof(target) - 1);
+      if (n <= 0) continue;
+      const std::string link(target, static_cast<size_t>(n));
+      if (link.rfind("socket:[", 0) == 0) inodes.insert(link.substr(8, link.size() - 9));
+    }
+    closedir(dir);
+  }
+  std::set<int> ports;
+  for (const char* table : {"/proc/self/net/udp", "/proc/self/net/udp6"}) {
+    std::ifstream in(table);
+    std::string line;
+    std::getline(in, line);  // the header
+    while (std::getline(in, line)) {
+      std::istringstream fields(line);
+      std::string sl, local, remote, st, queues, tr, retrnsmt, uid, timeout, inode;
+      fields >> sl >> local >> remote >> st >> queues >> tr >> retrnsmt >> uid >> timeout >> inode;
+      if (inodes.count(inode) == 0) continue;
+      ports.insert(std::stoi(local.substr(local.rfind(':') + 1), nullptr, 16));
+    }
+  }
+  return ports;
+}
 
 // What `slapse run` computes from a file with a session's default options.
 struct Offline {
@@ -90,6 +133,7 @@ class RtspPushTest : public ::testing::Test {
     o.port = 0;
     o.sessions.max_sessions = 4;
     o.sessions.rtsp_port = 0;  // a free one: ctest runs tests side by side
+    o.sessions.rtp_ports = kRtpPorts;
     o.shutdown_grace_s = 1;
     auto server = SlapseServer::Start(o);
     ASSERT_TRUE(server.ok()) << server.status().ToString();
@@ -114,10 +158,11 @@ class RtspPushTest : public ::testing::Test {
     return created.ok() ? *created : v1::Session();
   }
 
-  std::unique_ptr<FfmpegProcess> Publish(const std::string& url, int drive = 0) {
+  std::unique_ptr<FfmpegProcess> Publish(const std::string& url, int drive = 0,
+                                         const std::string& transport = "tcp") {
     return std::make_unique<FfmpegProcess>(
         std::vector<std::string>{"-re", "-i", drives_[drive].video_path, "-c", "copy", "-f", "rtsp",
-                                 "-rtsp_transport", "tcp", url});
+                                 "-rtsp_transport", transport, url});
   }
 
   // Watches `name` to its final event; returns the last StateChange.
@@ -338,6 +383,35 @@ TEST_F(RtspPushTest, AKilledPublisherIsALostCameraNotAnEnd) {
   EXPECT_EQ(got->error().code(), static_cast<int>(StatusCode::kUnavailable));
   EXPECT_NE(got->error().message().find("lost without a TEARDOWN"), std::string::npos)
       << got->error().message();
+}
+
+// RECORD over UDP: the server's RTP/RTCP ports come from the configured
+// range (what a container publishes), and the stream gets through.
+TEST_F(RtspPushTest, AUdpPublisherGetsItsServerPortsFromTheRtpRange) {
+  const auto in_range = [](const std::set<int>& ports) {
+    std::vector<int> out;
+    for (int p : ports) {
+      if (p >= kRtpPorts.min_port && p <= kRtpPorts.max_port) out.push_back(p);
+    }
+    return out;
+  };
+  ASSERT_TRUE(in_range(OwnUdpPorts()).empty());  // before any publisher
+  const v1::Session a = Create("udp", 0);
+  ASSERT_FALSE(a.name().empty());
+  auto cam = Publish(PublishUrl(a), 0, "udp");
+  ASSERT_GE(WaitForFrames(a.name(), 10), 10) << "no frames over UDP";
+  // RTP/RTCP pairs from the range (gst-rtsp-server binds one pair per
+  // address family it serves: IPv4, and IPv6 where the host has it).
+  const std::vector<int> ports = in_range(OwnUdpPorts());
+  ASSERT_GE(ports.size(), 2u) << "no RTP/RTCP pair from " << kRtpPorts.ToString();
+  ASSERT_EQ(ports.size() % 2, 0u);
+  for (size_t i = 0; i < ports.size(); i += 2) {
+    EXPECT_EQ(ports[i] % 2, 0) << ports[i];
+    EXPECT_EQ(ports[i + 1], ports[i] + 1) << ports[i];
+  }
+  EXPECT_EQ(cam->Wait(std::chrono::seconds(20)), 0);
+  const v1::StateChange end = WatchToEnd(a.name());
+  EXPECT_EQ(end.state(), v1::Session::FINISHED) << end.message();
 }
 
 TEST_F(RtspPushTest, NoPublisherIsDeadlineExceeded) {

@@ -13,6 +13,7 @@
 
 #include "server/ingest_source.h"
 #include "server/session.h"
+#include "server/udp_ports.h"
 #include "server/upload_queue.h"
 #include "server/worker_pool.h"
 
@@ -161,6 +162,50 @@ TEST(IngestSourceTest, RtpSdpTimeoutsFailBeforeVideoAndFinishAfter) {
   end.frames = end.session_frames = 30;
   EXPECT_FALSE(source->AfterConnection(s.get(), end).has_value());
   EXPECT_EQ(s->Snapshot().state(), v1::Session::FINISHED);
+}
+
+TEST(UdpPortRangeTest, ParsesWholePairRangesAndNamesTheRuleBroken) {
+  auto any = ParseUdpPortRange("any");
+  ASSERT_TRUE(any.ok());
+  EXPECT_TRUE(any->any());
+  EXPECT_TRUE(any->Contains(5004));
+  EXPECT_EQ(any->ToString(), "any");
+  EXPECT_TRUE(ParseUdpPortRange("")->any());
+  auto r = ParseUdpPortRange("40000-40099");
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(r->min_port, 40000);
+  EXPECT_EQ(r->max_port, 40099);
+  EXPECT_TRUE(r->Contains(40000));
+  EXPECT_TRUE(r->Contains(40099));
+  EXPECT_FALSE(r->Contains(39999));
+  EXPECT_FALSE(r->Contains(40100));
+  EXPECT_EQ(ParseUdpPortRange(r->ToString())->max_port, 40099);  // round trip
+  const std::pair<const char*, const char*> bad[] = {
+      {"40000", "MIN-MAX"},         {"40000-", "MIN-MAX"},    {"-40099", "MIN-MAX"},
+      {"4a000-40099", "digits"},    {"40000-70001", "65535"}, {"1000-1099", "1024"},
+      {"40099-40000", "below MAX"}, {"40001-40099", "even"},  {"40000-40098", "even"},
+      {"40000-4000000", "65535"}};
+  for (const auto& [text, rule] : bad) {
+    auto got = ParseUdpPortRange(text);
+    ASSERT_FALSE(got.ok()) << text;
+    EXPECT_EQ(got.status().code(), StatusCode::kInvalidArgument) << text;
+    EXPECT_NE(got.status().message().find(rule), std::string::npos) << got.status().message();
+  }
+}
+
+TEST(UdpPortRangeTest, AnSdpPortOutsideTheRangeIsInvalidAndNamesBoth) {
+  const std::string sdp =
+      "v=0\r\nc=IN IP4 127.0.0.1\r\nm=video 5004 RTP/AVP 96\r\na=rtpmap:96 H264/90000\r\n";
+  EXPECT_TRUE(CheckRtpPortsInRange(sdp, UdpPortRange{}).ok());
+  EXPECT_TRUE(CheckRtpPortsInRange(sdp, UdpPortRange{5004, 5005}).ok());
+  const Status s = CheckRtpPortsInRange(sdp, UdpPortRange{40000, 40099});
+  EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(s.message().find("5004"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("40000-40099"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("--rtp-ports"), std::string::npos) << s.message();
+  // the RTCP port (RTP + 1) must be in the range too
+  EXPECT_EQ(CheckRtpPortsInRange(sdp, UdpPortRange{5002, 5004}).code(),
+            StatusCode::kInvalidArgument);
 }
 
 TEST(IngestSourceTest, RtspPushEndsWithThePublisher) {

@@ -23,6 +23,7 @@
 #include "core/planes/plane_extraction.h"
 #include "server/log.h"
 #include "server/server.h"
+#include "server/udp_ports.h"
 
 namespace slapse::cli {
 namespace {
@@ -147,6 +148,14 @@ int RunServe(int argc, char** argv) {
                  "RECORD at /sessions/ID/PATH with the session's credentials (0: a free port)")
       ->type_name("PORT")
       ->capture_default_str();
+  std::string rtp_ports = o.sessions.rtp_ports.ToString();
+  app.add_option("--rtp-ports", rtp_ports,
+                 "UDP ports RTP arrives on, MIN-MAX (MIN even, MAX odd): an RTP/SDP session's "
+                 "m=video port must lie in it, and RTSP publishers recording over UDP get their "
+                 "server ports from it; publish exactly this range from a container ('any': "
+                 "no range)")
+      ->type_name("RANGE")
+      ->capture_default_str();
   // serve persists by default; the library's default (in memory) is for
   // tests and embedding.
   o.sessions.data_dir = server::DefaultDataDir();
@@ -246,6 +255,9 @@ int RunServe(int argc, char** argv) {
         CheckRange("upload-stall-timeout-s", stall_s, int64_t{0}, int64_t{1} << 31)}) {
     if (!s.ok()) return Fail("serve", s.message(), 2);
   }
+  auto rtp_range = server::ParseUdpPortRange(rtp_ports);
+  if (!rtp_range.ok()) return Fail("serve", "--rtp-ports: " + rtp_range.status().message(), 2);
+  o.sessions.rtp_ports = *rtp_range;
   o.port = static_cast<int>(port);
   o.sessions.max_sessions = static_cast<int>(max_sessions);
   o.sessions.max_upload_bytes = max_upload_mb << 20;
@@ -277,8 +289,9 @@ int RunServe(int argc, char** argv) {
     std::printf("slapse metrics on http://%s:%d/metrics\n", o.address.c_str(),
                 (*server)->http_port());
   }
-  std::printf("slapse RTSP ingest on rtsp://%s:%d\n", o.sessions.rtsp_push_host.c_str(),
-              (*server)->sessions().rtsp_port());
+  std::printf("slapse RTSP ingest on rtsp://%s:%d (RTP over UDP on ports %s)\n",
+              o.sessions.rtsp_push_host.c_str(), (*server)->sessions().rtsp_port(),
+              o.sessions.rtp_ports.ToString().c_str());
   std::fflush(stdout);
   server::Log(server::LogLevel::kInfo, "", "serve",
               "gRPC on " + o.address + ":" + std::to_string((*server)->port()) +
