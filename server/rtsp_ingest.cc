@@ -323,6 +323,17 @@ StatusOr<std::unique_ptr<RtspIngest>> RtspIngest::Start(const RtspIngestOptions&
                                 std::to_string(options.port));
   }
   if (options.key.size() < 16) return InvalidArgumentError("the RTSP ingest key is too short");
+  const std::string& url_host = options.url_host;
+  if (url_host.size() > 253 ||
+      url_host.find_first_not_of(
+          "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789.-") !=
+          std::string::npos ||
+      (!url_host.empty() && (url_host.front() == '-' || url_host.front() == '.'))) {
+    return InvalidArgumentError(
+        "the RTSP ingest URL host must be a DNS name or an IPv4 address (letters, digits, '.', "
+        "'-'; serve --rtsp-url-host), got '" +
+        url_host + "'");
+  }
   const UdpPortRange& udp = options.rtp_ports;
   if (!udp.any() && !(udp.min_port > 0 && udp.min_port < udp.max_port && udp.max_port <= 65535)) {
     return InvalidArgumentError("RTP port range " + udp.ToString() + " is not a port range");
@@ -413,8 +424,9 @@ RtspIngest::~RtspIngest() {
 StatusOr<std::string> RtspIngest::Mount(const std::string& session_name, const std::string& path) {
   const std::string id = SessionId(session_name);
   const std::string mount_path = "/" + std::string(kSessionPrefix) + id + "/" + path;
-  const std::string url =
-      "rtsp://" + impl_->options.host + ":" + std::to_string(port_) + mount_path;
+  const RtspIngestOptions& o = impl_->options;
+  const std::string url = "rtsp://" + (o.url_host.empty() ? o.host : o.url_host) + ":" +
+                          std::to_string(port_) + mount_path;
   {
     std::lock_guard<std::mutex> lock(impl_->mu);
     if (impl_->by_session.count(session_name) > 0) return url;

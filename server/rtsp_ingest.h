@@ -38,6 +38,10 @@ namespace slapse::server {
 struct RtspIngestOptions {
   // Address the RTSP server binds and that ingest URLs name.
   std::string host = "127.0.0.1";
+  // The host ingest URLs name instead of `host`, when cameras reach the port
+  // by another name (a Kubernetes pod's stable DNS name, a per-replica
+  // load balancer, NAT): a DNS name or an IPv4 address; "" = `host`.
+  std::string url_host;
   // TCP port; 0 = a free one (RtspIngest::port()).
   int port = 0;
   // Secret the publish passwords derive from (LoadOrCreateRtspIngestKey).

@@ -74,6 +74,7 @@ Status SessionManager::Open() {
   if (!key.ok()) return key.status();
   RtspIngestOptions rtsp;
   rtsp.host = options_.rtsp_push_host;
+  rtsp.url_host = options_.rtsp_url_host;
   rtsp.port = options_.rtsp_port;
   rtsp.key = std::move(*key);
   rtsp.buffer_bytes = options_.upload_buffer_bytes;

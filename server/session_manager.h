@@ -56,6 +56,9 @@ struct SessionManagerOptions {
   // RTSP push: the address the server's one RTSP ingest port binds and that
   // ingest URLs name (server/rtsp_ingest.h).
   std::string rtsp_push_host = "127.0.0.1";
+  // The host ingest URLs name instead (RtspIngestOptions::url_host); "" =
+  // rtsp_push_host.
+  std::string rtsp_url_host;
   // The RTSP ingest port of every push session; 0 = a free one
   // (SessionManager::rtsp_port()). `slapse serve` uses 8554.
   int rtsp_port = 0;

@@ -439,6 +439,37 @@ TEST_F(RtspPushTest, ATakenRtspPortIsUnavailable) {
       << second.status().message();
 }
 
+// --rtsp-url-host: ingest URLs name the cameras' way to the port (here a
+// stable DNS name) while the port binds --rtsp-host; a name that cannot be
+// a URL host is refused at start.
+TEST_F(RtspPushTest, IngestUrlsNameTheUrlHostAndABadOneIsRefused) {
+  server::ServerOptions o;
+  o.port = 0;
+  o.sessions.rtsp_url_host = "slapse-0.slapse-pods";
+  auto named = SlapseServer::Start(o);
+  ASSERT_TRUE(named.ok()) << named.status().ToString();
+  auto client = SlapseClient::Connect("127.0.0.1:" + std::to_string((*named)->port()),
+                                      testing::TestClientOptions());
+  v1::Session request;
+  request.mutable_rtsp_push()->set_path("cam1");
+  *request.mutable_intrinsics() = api::IntrinsicsToProto(drives_[0].intrinsics);
+  auto created = client->CreateSession(request);
+  ASSERT_TRUE(created.ok()) << created.status().ToString();
+  const std::string expected =
+      "rtsp://slapse-0.slapse-pods:" + std::to_string((*named)->sessions().rtsp_port()) +
+      "/sessions/";
+  EXPECT_EQ(created->ingest_url().rfind(expected, 0), 0u) << created->ingest_url();
+  (*named)->Shutdown();
+  for (const char* bad : {"user@host", "host/path", "-host", "a b"}) {
+    o.sessions.rtsp_url_host = bad;
+    auto refused = SlapseServer::Start(o);
+    ASSERT_FALSE(refused.ok()) << bad;
+    EXPECT_EQ(refused.status().code(), StatusCode::kInvalidArgument) << bad;
+    EXPECT_NE(refused.status().message().find("--rtsp-url-host"), std::string::npos)
+        << refused.status().message();
+  }
+}
+
 // The credentials derive from the data directory's key: the same after a
 // restart, different for another key.
 TEST(RtspIngestKeyTest, TheKeyFilePersistsAndInMemoryKeysDiffer) {

@@ -142,6 +142,11 @@ int RunServe(int argc, char** argv) {
   app.add_option("--rtsp-host", o.sessions.rtsp_push_host,
                  "address the RTSP ingest port binds and ingest URLs name (default: --address)")
       ->type_name("IPV4");
+  app.add_option("--rtsp-url-host", o.sessions.rtsp_url_host,
+                 "the host ingest URLs name, when cameras reach the RTSP port by another name "
+                 "than --rtsp-host (a pod's stable DNS name, a per-replica load balancer, NAT): "
+                 "a DNS name or an IPv4 address (default: --rtsp-host)")
+      ->type_name("HOST");
   int64_t rtsp_port = 8554;  // the CLI's fixed, documented port (docs/DEPLOY.md)
   app.add_option("--rtsp-port", rtsp_port,
                  "the one RTSP ingest port of every RTSP push session: publishers ANNOUNCE / "
@@ -289,9 +294,11 @@ int RunServe(int argc, char** argv) {
     std::printf("slapse metrics on http://%s:%d/metrics\n", o.address.c_str(),
                 (*server)->http_port());
   }
-  std::printf("slapse RTSP ingest on rtsp://%s:%d (RTP over UDP on ports %s)\n",
+  std::printf("slapse RTSP ingest on rtsp://%s:%d (RTP over UDP on ports %s%s%s)\n",
               o.sessions.rtsp_push_host.c_str(), (*server)->sessions().rtsp_port(),
-              o.sessions.rtp_ports.ToString().c_str());
+              o.sessions.rtp_ports.ToString().c_str(),
+              o.sessions.rtsp_url_host.empty() ? "" : "; URLs name ",
+              o.sessions.rtsp_url_host.c_str());
   std::fflush(stdout);
   server::Log(server::LogLevel::kInfo, "", "serve",
               "gRPC on " + o.address + ":" + std::to_string((*server)->port()) +

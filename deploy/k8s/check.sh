@@ -27,6 +27,11 @@ command -v kubectl >/dev/null || { echo "check: kubectl not found" >&2; exit 1; 
 command -v haproxy >/dev/null || { echo "check: haproxy not found (install-deps.sh --haproxy)" >&2; exit 1; }
 echo "check: $(kubectl version --client 2>/dev/null | head -2 | tr '\n' ' ')"
 kubectl kustomize "$here" > "$tmp/rendered.yaml"
+# The optional per-replica RTSP Services (rtsp-external.yaml, not in the
+# kustomization by default) are checked with the rest.
+if ! grep -q "rtsp-external.yaml" "$here/kustomization.yaml"; then
+  { echo "---"; cat "$here/rtsp-external.yaml"; } >> "$tmp/rendered.yaml"
+fi
 echo "check: kubectl kustomize rendered $(grep -c '^kind:' "$tmp/rendered.yaml") objects"
 
 # 1. Cross-references; prints the replica list for step 2.
@@ -64,9 +69,16 @@ for name, w in workloads.items():
         for p in ("readinessProbe", "livenessProbe"):
             probe = c.get(p)
             if probe is None: err(f"{name}/{c['name']}: no {p}")
+def pod_labels(w, i):
+    # A StatefulSet's pod i also carries the controller's pod-name label.
+    labels = dict(w["spec"]["template"]["metadata"]["labels"])
+    if w["kind"] == "StatefulSet":
+        labels["statefulset.kubernetes.io/pod-name"] = f'{w["metadata"]["name"]}-{i}'
+    return labels
 for name, s in by_kind.get("Service", {}).items():
     sel = s["spec"].get("selector", {})
-    pods = [w for w in workloads.values() if matches(sel, w["spec"]["template"]["metadata"]["labels"])]
+    pods = [w for w in workloads.values()
+            if any(matches(sel, pod_labels(w, i)) for i in range(w["spec"].get("replicas", 1)))]
     if not pods: err(f"Service {name}: selects no pods")
     for port in s["spec"]["ports"]:
         tp = port.get("targetPort")
