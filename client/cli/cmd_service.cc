@@ -343,7 +343,8 @@ void AddSourceFlags(CLI::App& app, SourceFlags* f) {
       ->type_name("MS")
       ->capture_default_str();
   app.add_option("--reconnect-attempts", f->reconnect_attempts,
-                 "--rtsp-pull: retries per outage (drop, end, unreachable; 0: none)")
+                 "--rtsp-pull: retries per outage (camera lost: connection closed or silent; "
+                 "unreachable; 0: none); a camera that ends its stream finishes the session")
       ->type_name("N")
       ->capture_default_str();
   app.add_option("--reconnect-interval-ms", f->reconnect_interval_ms,
