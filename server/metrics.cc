@@ -246,6 +246,13 @@ void ServerMetrics::RpcFinished(const std::string& method, int grpc_code) {
 
 std::string ServerMetrics::Exposition() const {
   std::vector<MetricFamily> families = SessionFamilies(AllSessions(*sessions_));
+  MetricFamily store = Family("slapse_store_bytes",
+                              "Bytes of data in the session store: SQLite pages in use, "
+                              "(page_count - freelist_count) * page_size; the measure of "
+                              "serve --retention-max-store-mb",
+                              MetricType::Gauge);
+  AddSample(&store, {}, static_cast<double>(sessions_->StoreBytes()));
+  families.push_back(std::move(store));
   for (auto& f : registry_->Collect()) families.push_back(std::move(f));
   for (auto& f : Stages().registry->Collect()) families.push_back(std::move(f));
   return prometheus::TextSerializer().Serialize(families);

@@ -11,6 +11,8 @@
 //             flight by method, and the open WatchSession streams (watchers)
 //   stages    StageTimer, observed by the session runners of the process:
 //             seconds per frame in each stage, as histograms
+//   store     the store's size (SessionManager::StoreBytes, Store::SizeBytes),
+//             read at scrape time
 //
 //   ServerMetrics metrics(&manager);
 //   builder.experimental().SetInterceptorCreators(metrics.TakeInterceptorFactories());

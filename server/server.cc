@@ -97,6 +97,9 @@ StatusOr<std::unique_ptr<SlapseServer>> SlapseServer::Start(const ServerOptions&
   if (options.sessions.retention_ttl_s < 0) {
     return InvalidArgumentError("retention_ttl_s must be >= 0 (0: keep results)");
   }
+  if (options.sessions.retention_max_store_bytes < 0) {
+    return InvalidArgumentError("retention_max_store_bytes must be >= 0 (0: no budget)");
+  }
   if (options.http_port < ServerOptions::kAnyFreePort || options.http_port > 65535) {
     return InvalidArgumentError("http_port must be in [0, 65535] (or kAnyFreePort), got " +
                                 std::to_string(options.http_port));

@@ -85,7 +85,9 @@ Status SessionManager::Open() {
   auto stored = store_->LoadSessions();
   if (!stored.ok()) return stored.status();
   for (StoredSession& s : *stored) Restore(std::move(s));
-  if (options_.retention_ttl_s > 0) retention_ = std::thread([this] { RetentionLoop(); });
+  if (options_.retention_ttl_s > 0 || options_.retention_max_store_bytes > 0) {
+    retention_ = std::thread([this] { RetentionLoop(); });  // server/retention.cc
+  }
   return Status::Ok();
 }
 
@@ -135,29 +137,6 @@ void SessionManager::Restore(StoredSession stored) {
     }
   }
   pool_.Submit([s, keep = options_.final_poses_in_memory] { SessionRunner(s, keep).Run(); });
-}
-
-void SessionManager::RetentionLoop() {
-  const int64_t ttl_s = options_.retention_ttl_s;
-  const auto period = std::chrono::milliseconds(std::clamp<int64_t>(ttl_s * 250, 200, 60000));
-  std::unique_lock<std::mutex> lock(mu_);
-  while (!shutting_down_) {
-    retention_cv_.wait_for(lock, period, [this] { return shutting_down_; });
-    if (shutting_down_) break;
-    std::vector<std::shared_ptr<Session>> all;
-    for (const auto& [ordinal, s] : sessions_) all.push_back(s);
-    lock.unlock();
-    const auto now = TimeUtil::GetCurrentTime();
-    for (const auto& s : all) {
-      v1::Session snap = s->Snapshot();
-      if (!IsTerminal(snap.state()) || snap.state() == v1::Session::EXPIRED) continue;
-      if (TimeUtil::DurationToSeconds(now - snap.update_time()) < ttl_s) continue;
-      s->Expire("its results were deleted by the retention policy: it ended (" +
-                v1::Session::State_Name(snap.state()) + ") more than " + std::to_string(ttl_s) +
-                " s ago (serve --retention-ttl-s)");
-    }
-    lock.lock();
-  }
 }
 
 int SessionManager::ActiveCountLocked() const {
@@ -228,6 +207,15 @@ StatusOr<v1::Session> SessionManager::Create(const v1::Session& request) {
 }
 
 int SessionManager::rtsp_port() const { return rtsp_ == nullptr ? 0 : rtsp_->port(); }
+
+int64_t SessionManager::StoreBytes() const {
+  std::shared_ptr<Store> store;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    store = store_;
+  }
+  return store == nullptr ? 0 : store->SizeBytes();
+}
 
 StatusOr<std::shared_ptr<Session>> SessionManager::Find(const std::string& name) const {
   const std::string prefix = kSessionPrefix;

@@ -5,8 +5,9 @@
 // active at once and each holds one worker thread for its whole life (stream
 // reads block), so the pool never oversubscribes. Sessions and their results
 // persist in a Store (server/store.h) under `data_dir`; Open() restores them
-// after a restart. Finished sessions keep their results until deleted or,
-// with a retention TTL, until they expire (state EXPIRED).
+// after a restart. Finished sessions keep their results until deleted or
+// until retention expires them (state EXPIRED): after a TTL, or oldest first
+// while the store is over its size budget.
 //
 // After a restart (clean or kill -9): finished sessions are as they were; an
 // upload that was running ends FAILED (ABORTED: upload again to a new
@@ -73,6 +74,12 @@ struct SessionManagerOptions {
   // A finished session's results are deleted this long after it ended (it
   // becomes EXPIRED, with a StateChange saying so); 0 = kept until deleted.
   int64_t retention_ttl_s = 0;
+  // A size budget for the store (Store::SizeBytes: the bytes of its pages in
+  // use); 0 = none. While the store is over it, the finished sessions
+  // (FINISHED, FAILED, STOPPED; never an active one) expire oldest end time
+  // first, as by the TTL, until it is under. With only active sessions
+  // left over the budget, the log says so (once) and nothing is deleted.
+  int64_t retention_max_store_bytes = 0;
   // A session's pipeline keeps this many final poses in memory after each
   // step and forgets the older ones, with the anchors and the planes no
   // longer held (Pipeline::ForgetFinal): the store has them, and a session's
@@ -103,6 +110,8 @@ class SessionManager {
   Status Open();
   // The RTSP ingest port (after Open), 0 if not started.
   int rtsp_port() const;
+  // The store's size (Store::SizeBytes), 0 before Open.
+  int64_t StoreBytes() const;
 
   // Validates and starts a session from `request` (source, intrinsics,
   // pipeline options). INVALID_ARGUMENT (also a bad RTSP pull URL or
@@ -147,9 +156,14 @@ class SessionManager {
   UploadQueueOptions QueueOptions() const;
   // Restores one stored session; resumes it if it was active.
   void Restore(StoredSession stored);
-  // Retention: expires the finished sessions past retention_ttl_s, until
-  // Shutdown.
+  // Retention: every period until Shutdown, the TTL pass then the budget
+  // pass, then the store's free pages go back (Store::Reclaim).
   void RetentionLoop();
+  // Expires the finished sessions that ended more than retention_ttl_s ago.
+  int ExpireByTtl(const std::vector<std::shared_ptr<Session>>& all);
+  // Expires finished sessions, oldest end first, while the store is over
+  // retention_max_store_bytes.
+  int ExpireOverBudget(const std::vector<std::shared_ptr<Session>>& all);
 
   const SessionManagerOptions options_;
   std::shared_ptr<Store> store_;
@@ -159,6 +173,7 @@ class SessionManager {
   bool shutting_down_ = false;
   std::condition_variable retention_cv_;  // with mu_: wakes the loop at Shutdown
   std::thread retention_;
+  bool over_budget_logged_ = false;   // retention thread only: "only active sessions" said
   std::unique_ptr<RtspIngest> rtsp_;  // RTSP push mounts; outlives the workers
   WorkerPool pool_;                   // one thread per active session; last, so it stops first
 };

@@ -2,9 +2,21 @@
 // client: DESCRIBE / SETUP / PLAY, RTP interleaved on the TCP connection)
 // and, when the connection ends or cannot be made, connects again after a
 // growing wait while its ReconnectPolicy allows; frames flowing end an
-// outage. Each attempt emits a Reconnecting event. With no retries left the
-// session FAILS, except that with reconnect.max_attempts 0 a stream that
-// delivered video and ended by itself FINISHES.
+// outage. Each attempt emits a Reconnecting event.
+//
+// How a connection that delivered video ends:
+//   the camera ended the stream  FFmpeg's end of input (after an RTCP BYE on
+//                                the stream) and the camera still answers on
+//                                its RTSP connection (MvReaderOptions::
+//                                check_source_at_end: PAUSE -> 200): FINISHED,
+//                                whatever the reconnect policy
+//   the camera was lost          the connection closed (killed camera: the
+//                                same end of input from FFmpeg, but no answer)
+//                                or no video for receive_timeout_ms: an
+//                                outage; reconnects by the policy, then FAILED
+//                                UNAVAILABLE "camera lost ..."
+// A connection that cannot be made or delivers nothing is retried the same
+// way; with no retries left the session FAILS with the last error.
 #include <google/protobuf/util/time_util.h>
 
 #include <algorithm>
@@ -45,12 +57,13 @@ class RtspPullSource : public IngestSource {
   // Why connection `end` ended, for events and messages.
   std::string Reason(const ConnectionEnd& end) const;
   // Ends the session when the policy has no retry left.
-  void GiveUp(Session* session, const ConnectionEnd& end, const std::string& reason) const;
+  void GiveUp(Session* session, const std::string& reason) const;
 
   const std::string url_;
   const std::string shown_url_;  // without credentials
   const v1::ReconnectPolicy policy_;
   int attempt_ = 0;     // retries in the current outage
+  std::string lost_;    // the current outage began with "camera lost ..." (Reason), or ""
   int reconnects_ = 0;  // retries over the session's life
 };
 
@@ -59,6 +72,7 @@ StatusOr<std::unique_ptr<MvReader>> RtspPullSource::Open(std::function<bool()> i
   // microseconds; the interrupt callback bounds the rest.
   MvReaderOptions o = ReaderOptions(std::move(interrupt));
   o.format = "rtsp";
+  o.check_source_at_end = true;  // a closed connection is a lost camera, not an end
   o.format_options = {{"rtsp_transport", "tcp"},
                       {"allowed_media_types", "video"},
                       {"timeout", std::to_string(int64_t{receive_timeout_ms()} * 1000)}};
@@ -73,39 +87,44 @@ StatusOr<std::unique_ptr<MvReader>> RtspPullSource::Open(std::function<bool()> i
   return Status(reader.status().code(), message);
 }
 
+// A clean end (the camera still answered after FFmpeg's end of input).
+bool EndedByCamera(const ConnectionEnd& end) {
+  return end.frames > 0 && !end.timed_out && end.status.code() == StatusCode::kOutOfRange;
+}
+
+// A connection that delivered video and then lost the camera.
+bool LostCamera(const ConnectionEnd& end) {
+  return end.frames > 0 && (end.timed_out || end.status.code() == StatusCode::kUnavailable);
+}
+
 std::string RtspPullSource::Reason(const ConnectionEnd& end) const {
+  const std::string frames = std::to_string(end.frames) + " frames";
   if (end.timed_out && end.frames == 0) {
     return "no video within start_timeout_ms=" + std::to_string(start_timeout_ms()) +
            " of connecting";
   }
   if (end.timed_out) {
-    return "no video for receive_timeout_ms=" + std::to_string(receive_timeout_ms()) + " after " +
-           std::to_string(end.frames) + " frames";
+    return "camera lost: no video for receive_timeout_ms=" + std::to_string(receive_timeout_ms()) +
+           " after " + frames;
   }
-  if (end.status.code() == StatusCode::kOutOfRange) {
-    return "the stream ended (end of file: RTCP BYE or a closed connection) after " +
-           std::to_string(end.frames) + " frames";
-  }
+  if (LostCamera(end)) return "camera lost after " + frames + ": " + end.status.message();
   return end.status.message();
 }
 
-void RtspPullSource::GiveUp(Session* s, const ConnectionEnd& end, const std::string& reason) const {
-  if (policy_.max_attempts() == 0 && end.frames > 0 && !end.timed_out &&
-      end.status.code() == StatusCode::kOutOfRange) {
-    s->End({v1::Session::FINISHED, Status::Ok(),
-            reason + "; no reconnect (reconnect.max_attempts is 0)"});
-  } else if (policy_.max_attempts() == 0) {
+void RtspPullSource::GiveUp(Session* s, const std::string& reason) const {
+  if (policy_.max_attempts() == 0) {
     s->End({v1::Session::FAILED,
             UnavailableError("rtsp_pull '" + shown_url_ + "': " + reason +
                              " (no reconnect: reconnect.max_attempts is 0)"),
             ""});
-  } else {
-    s->End({v1::Session::FAILED,
-            UnavailableError("rtsp_pull '" + shown_url_ + "': gave up after " +
-                             std::to_string(attempt_) +
-                             " reconnect attempt(s); last error: " + reason),
-            ""});
+    return;
   }
+  s->End(
+      {v1::Session::FAILED,
+       UnavailableError("rtsp_pull '" + shown_url_ + "': " + (lost_.empty() ? "" : lost_ + "; ") +
+                        "gave up after " + std::to_string(attempt_) +
+                        " reconnect attempt(s); last error: " + reason),
+       ""});
 }
 
 std::optional<int> RtspPullSource::AfterConnection(Session* s, const ConnectionEnd& end) {
@@ -117,10 +136,18 @@ std::optional<int> RtspPullSource::AfterConnection(Session* s, const ConnectionE
     s->EndStream(end.status, "");
     return std::nullopt;
   }
+  if (EndedByCamera(end)) {
+    s->End({v1::Session::FINISHED, Status::Ok(),
+            "the stream ended: the camera ended it after " + std::to_string(end.frames) +
+                " frames of this connection (end of stream, RTCP BYE, with the camera "
+                "still answering on its RTSP connection)"});
+    return std::nullopt;
+  }
   if (end.frames > 0) attempt_ = 0;  // frames flowed: an outage is over
   const std::string reason = Reason(end);
+  if (attempt_ == 0) lost_ = LostCamera(end) ? reason : "";
   if (attempt_ >= policy_.max_attempts()) {
-    GiveUp(s, end, reason);
+    GiveUp(s, reason);
     return std::nullopt;
   }
   ++attempt_;

@@ -94,8 +94,9 @@ StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& data_dir) {
                                    "': " + sqlite3_errstr(rc) + " (serve --data-dir)");
   }
   sqlite3_busy_timeout(db, 5000);
-  for (const char* sql : {"PRAGMA journal_mode=WAL", "PRAGMA synchronous=NORMAL",
-                          "PRAGMA foreign_keys=OFF", kSchema}) {
+  // auto_vacuum takes effect only on a new database (before its first table).
+  for (const char* sql : {"PRAGMA auto_vacuum=INCREMENTAL", "PRAGMA journal_mode=WAL",
+                          "PRAGMA synchronous=NORMAL", "PRAGMA foreign_keys=OFF", kSchema}) {
     Status s = store->Exec(sql);
     if (!s.ok()) {
       return FailedPreconditionError("the database '" + path + "' is not usable: " + s.message());
@@ -138,6 +139,38 @@ sqlite3_stmt* Store::Prepare(const char* sql) {
   }
   statements_.emplace_back(sql, st);
   return st;
+}
+
+int64_t Store::PragmaLocked(const char* pragma) {
+  sqlite3_stmt* st = Prepare(pragma);
+  if (st == nullptr) return -1;
+  const int64_t value = sqlite3_step(st) == SQLITE_ROW ? sqlite3_column_int64(st, 0) : -1;
+  sqlite3_reset(st);  // no read transaction left open
+  return value;
+}
+
+int64_t Store::SizeBytes() {
+  std::lock_guard<std::mutex> lock(mu_);
+  const int64_t pages = PragmaLocked("PRAGMA page_count");
+  const int64_t free_pages = PragmaLocked("PRAGMA freelist_count");
+  const int64_t page_bytes = PragmaLocked("PRAGMA page_size");
+  if (pages < 0 || free_pages < 0 || page_bytes < 0) return 0;
+  return (pages - free_pages) * page_bytes;
+}
+
+Status Store::Reclaim() {
+  std::lock_guard<std::mutex> lock(mu_);
+  // A statement left on a row holds a read transaction, which would keep the
+  // checkpoint from truncating the WAL.
+  for (auto& [sql, statement] : statements_) sqlite3_reset(statement);
+  // incremental_vacuum frees pages one row step at a time: step to the end.
+  sqlite3_stmt* st = Prepare("PRAGMA incremental_vacuum");
+  if (st == nullptr) return Error("prepare");
+  int rc;
+  while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
+  }
+  if (rc != SQLITE_DONE) return Error("incremental vacuum");
+  return Exec("PRAGMA wal_checkpoint(TRUNCATE)");
 }
 
 StatusOr<int64_t> Store::AddSession(const v1::Session& session) {

@@ -16,6 +16,17 @@
 // survives a process crash; an OS crash or power loss may lose the last
 // steps (the database stays consistent).
 //
+// Size (SizeBytes, the one measure of the store's size: the
+// slapse_store_bytes metric and the retention budget,
+// SessionManagerOptions::retention_max_store_bytes): the bytes of the pages
+// that hold data, (page_count - freelist_count) * page_size, so a deletion
+// counts at once. The file on disk is that plus its free pages plus the WAL.
+// A store created by this version has auto_vacuum=INCREMENTAL: Reclaim()
+// returns the free pages to the file system and truncates the WAL. A store
+// created before keeps auto_vacuum=NONE (changing it needs a VACUUM): its
+// free pages are reused by new rows, so the file stops growing but does not
+// shrink.
+//
 // Thread-safety: every method may be called from any thread (one connection
 // behind a mutex).
 #pragma once
@@ -93,6 +104,14 @@ class Store {
   // (exclusive), its points and planes; writes its row.
   Status ExpireResults(int64_t ordinal, const v1::Session& session, uint64_t keep_from_sequence);
 
+  // The bytes of data in the store (pages in use, above); an in-memory store
+  // counts its pages the same way. 0 if SQLite cannot tell.
+  int64_t SizeBytes();
+  // Gives the pages freed by deletions back to the file system (incremental
+  // vacuum; a no-op on a store with auto_vacuum=NONE, above) and truncates
+  // the WAL (checkpoint). Retention calls it after expiring sessions.
+  Status Reclaim();
+
   // Every session in creation order.
   StatusOr<std::vector<StoredSession>> LoadSessions();
   // Up to `max` events with sequence > after, ascending.
@@ -112,6 +131,8 @@ class Store {
  private:
   explicit Store(sqlite3* db) : db_(db) {}
   Status Exec(const std::string& sql);
+  // The first column of the first row of `pragma` (e.g. "PRAGMA page_count"), -1 on error.
+  int64_t PragmaLocked(const char* pragma);
   Status Error(const std::string& what) const;
   // A cached prepared statement for `sql`, reset.
   sqlite3_stmt* Prepare(const char* sql);

@@ -82,6 +82,11 @@ TEST(MetricsTest, SessionRpcsWatchersAndStagesOnMetrics) {
   const std::string empty = Get(server->http_port(), "/metrics");
   EXPECT_EQ(Sample(empty, "slapse_sessions{state=\"CREATED\"}"), 0.0) << empty;
   EXPECT_EQ(Sample(empty, "slapse_watchers"), 0.0) << empty;
+  // The store's size: its schema's pages before any session.
+  const std::optional<double> store_empty = Sample(empty, "slapse_store_bytes");
+  ASSERT_TRUE(store_empty.has_value()) << empty;
+  EXPECT_GT(*store_empty, 0.0);
+  EXPECT_EQ(*store_empty, static_cast<double>(server->sessions().StoreBytes()));
 
   // One bad request: an INVALID_ARGUMENT counted by method and code.
   v1::Session bad;
@@ -129,6 +134,8 @@ TEST(MetricsTest, SessionRpcsWatchersAndStagesOnMetrics) {
   EXPECT_NEAR(Sample(text, "slapse_session_fps" + s).value_or(-1), session->stats().fps(),
               1e-9 * session->stats().fps());
   EXPECT_EQ(Sample(text, "slapse_watchers"), 0.0);
+  // The session's events, poses and planes are in the store now.
+  EXPECT_GT(Sample(text, "slapse_store_bytes").value_or(0), *store_empty) << text;
   const std::string svc = "/slapse.v1.SlapseService/";
   EXPECT_EQ(Sample(text, "slapse_rpcs_total{code=\"INVALID_ARGUMENT\",method=\"" + svc +
                              "CreateSession\"}"),

@@ -216,6 +216,56 @@ TEST_F(RtspPullTest, PullsASimulatedDriveToFinished) {
   EXPECT_GT(traj->points_size(), 5);
 }
 
+// The camera ends its stream (the file's end: RTCP BYE, its RTSP connection
+// still open): FINISHED at once, even with reconnects allowed.
+TEST_F(RtspPullTest, CleanEndFinishesEvenWithReconnectsAllowed) {
+  RtspServerProcess camera(*drive_path_, 0);
+  ASSERT_FALSE(camera.url().empty()) << "tests/rtsp_server.py did not start";
+  v1::Session request = PullRequest(camera.url());
+  SetPolicy(&request, 3, 200, 2.0, 1000);
+  auto created = client_->CreateSession(request);
+  ASSERT_TRUE(created.ok()) << created.status().ToString();
+  Status end;
+  std::vector<v1::SessionEvent> events = WatchAll(created->name(), &end);
+  ASSERT_TRUE(end.ok()) << end.ToString();
+  for (const auto& e : events) EXPECT_FALSE(e.has_reconnecting()) << e.DebugString();
+  auto got = client_->GetSession(created->name());
+  ASSERT_TRUE(got.ok()) << got.status().ToString();
+  EXPECT_EQ(got->state(), v1::Session::FINISHED) << got->error().message();
+  EXPECT_NE(got->state_message().find("the camera ended it"), std::string::npos)
+      << got->state_message();
+  EXPECT_EQ(got->stats().reconnects(), 0);
+  EXPECT_GT(got->stats().frames(), 60) << "of the drive's 90";
+}
+
+// The camera process is killed mid-stream (kill -9: its TCP connection
+// closes, which FFmpeg also reads as the end of input): without reconnects
+// the session FAILS UNAVAILABLE "camera lost", not FINISHED.
+TEST_F(RtspPullTest, KilledCameraWithoutReconnectFailsCameraLost) {
+  RtspServerProcess camera(*drive_path_, 0);
+  ASSERT_FALSE(camera.url().empty()) << "tests/rtsp_server.py did not start";
+  auto created = client_->CreateSession(PullRequest(camera.url()));
+  ASSERT_TRUE(created.ok()) << created.status().ToString();
+  v1::Session s;
+  ASSERT_TRUE(WaitFor(
+      created->name(), std::chrono::seconds(10),
+      [](const v1::Session& x) { return x.stats().frames() >= 15; }, &s))
+      << s.DebugString();
+  camera.Kill();
+  Status end;
+  WatchAll(created->name(), &end);
+  ASSERT_TRUE(end.ok()) << end.ToString();
+  auto got = client_->GetSession(created->name());
+  ASSERT_TRUE(got.ok()) << got.status().ToString();
+  EXPECT_EQ(got->state(), v1::Session::FAILED) << got->state_message();
+  EXPECT_EQ(got->error().code(), static_cast<int>(StatusCode::kUnavailable));
+  const std::string& message = got->error().message();
+  EXPECT_NE(message.find("camera lost"), std::string::npos) << message;
+  EXPECT_NE(message.find("no longer answers"), std::string::npos) << message;
+  EXPECT_NE(message.find("no reconnect"), std::string::npos) << message;
+  EXPECT_LT(got->stats().frames(), 90) << "killed before the drive's end";
+}
+
 // Connection refused on every attempt: two retries after 200 and 400 ms, then
 // FAILED with UNAVAILABLE naming the URL (without its password) and the error.
 TEST_F(RtspPullTest, UnreachableCameraFailsUnavailableAfterTheBackoff) {
@@ -318,6 +368,8 @@ TEST_F(RtspPullTest, ReconnectsWhenTheServerComesBackThenGivesUp) {
   EXPECT_EQ(got->error().code(), static_cast<int>(StatusCode::kUnavailable))
       << got->error().message();
   EXPECT_NE(got->error().message().find("gave up after 4 reconnect attempt"), std::string::npos)
+      << got->error().message();
+  EXPECT_NE(got->error().message().find("camera lost after"), std::string::npos)
       << got->error().message();
   EXPECT_EQ(got->stats().reconnects(), reconnects + 4);
   EXPECT_GT(got->stats().frames(), before + 30);

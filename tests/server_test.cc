@@ -467,12 +467,14 @@ TEST_F(ServerTest, OverCapacityIsResourceExhausted) {
   (*small)->Shutdown();
 }
 
-StatusOr<std::unique_ptr<SlapseServer>> StartServerWithRetention(int64_t ttl_s) {
+StatusOr<std::unique_ptr<SlapseServer>> StartServerWithRetention(int64_t ttl_s,
+                                                                 int64_t max_store_bytes = 0) {
   ServerOptions o;
   o.address = "127.0.0.1";
   o.port = 0;
   o.sessions.event_ring_capacity = 4;
   o.sessions.retention_ttl_s = ttl_s;
+  o.sessions.retention_max_store_bytes = max_store_bytes;
   o.shutdown_grace_s = 1;
   return SlapseServer::Start(o);
 }
@@ -620,6 +622,124 @@ TEST_F(ServerTest, RetentionExpiresFinishedSessionsVisibly) {
   auto other = c->GetSession(waiting->name());
   ASSERT_TRUE(other.ok());
   EXPECT_EQ(other->state(), v1::Session::CREATED);
+}
+
+// Uploads the test drive to a new session of `c` and waits for its end.
+v1::Session RunUpload(SlapseClient& c, const v1::Session& request, const std::string& bytes) {
+  auto created = c.CreateSession(request);
+  EXPECT_TRUE(created.ok()) << created.status().ToString();
+  if (!created.ok()) return {};
+  EXPECT_TRUE(c.UploadBytes(created->name(), bytes).ok());
+  return WaitForEnd(c, created->name());
+}
+
+// --retention-max-store-mb: with room for two and a half sessions' results,
+// the store going over its budget expires the finished sessions whose end is
+// oldest (EXPIRED, saying why), keeps the newest and never touches an active
+// one; the store is back under the budget.
+TEST_F(ServerTest, RetentionBudgetExpiresTheOldestFinishedSessions) {
+  // One session's bytes in the store, measured on a server without a budget.
+  int64_t empty_bytes = 0, session_bytes = 0;
+  {
+    auto calibration = StartServerWithRetention(0);
+    ASSERT_TRUE(calibration.ok()) << calibration.status().ToString();
+    auto c = SlapseClient::Connect("127.0.0.1:" + std::to_string((*calibration)->port()),
+                                   TestClientOptions());
+    empty_bytes = (*calibration)->sessions().StoreBytes();
+    ASSERT_EQ(RunUpload(*c, UploadRequest(), *drive_).state(), v1::Session::FINISHED);
+    session_bytes = (*calibration)->sessions().StoreBytes() - empty_bytes;
+    (*calibration)->Shutdown();
+  }
+  ASSERT_GT(empty_bytes, 0);
+  ASSERT_GT(session_bytes, 4 * 4096) << "a session's results span several pages";
+  const int64_t budget = empty_bytes + session_bytes * 5 / 2;
+  auto server = StartServerWithRetention(0, budget);
+  ASSERT_TRUE(server.ok()) << server.status().ToString();
+  auto c =
+      SlapseClient::Connect("127.0.0.1:" + std::to_string((*server)->port()), TestClientOptions());
+  auto waiting = c->CreateSession(UploadRequest());  // CREATED: active, never expires
+  ASSERT_TRUE(waiting.ok());
+  std::vector<std::string> names;
+  for (int i = 0; i < 4; ++i) {
+    const v1::Session ended = RunUpload(*c, UploadRequest(), *drive_);
+    ASSERT_TRUE(ended.state() == v1::Session::FINISHED || ended.state() == v1::Session::EXPIRED)
+        << v1::Session::State_Name(ended.state());
+    names.push_back(ended.name());
+  }
+  // The retention pass runs every second: at least the two oldest go (a third
+  // only if the expired sessions' rows and part-used pages weigh half a
+  // session), oldest first, never the newest.
+  std::vector<v1::Session> now(4);
+  auto read_all = [&] {
+    for (int i = 0; i < 4; ++i) {
+      auto got = c->GetSession(names[i]);
+      ASSERT_TRUE(got.ok()) << got.status().ToString();
+      now[i] = *got;
+    }
+  };
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+  do {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    read_all();
+  } while ((now[0].state() != v1::Session::EXPIRED || now[1].state() != v1::Session::EXPIRED) &&
+           std::chrono::steady_clock::now() < deadline);
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));  // later passes: settled
+  read_all();
+  int expired = 0;
+  while (expired < 4 && now[expired].state() == v1::Session::EXPIRED) ++expired;
+  ASSERT_GE(expired, 2);
+  ASSERT_LE(expired, 3);
+  for (int i = 0; i < expired; ++i) {
+    EXPECT_NE(now[i].state_message().find("over its"), std::string::npos) << now[i].state_message();
+    EXPECT_NE(now[i].state_message().find("budget"), std::string::npos) << now[i].state_message();
+    EXPECT_NE(now[i].state_message().find("--retention-max-store-mb"), std::string::npos);
+    auto traj = c->GetTrajectory(names[i]);
+    EXPECT_EQ(traj.status().code(), StatusCode::kFailedPrecondition);
+    EXPECT_NE(traj.status().message().find("EXPIRED"), std::string::npos)
+        << traj.status().message();
+  }
+  for (int i = expired; i < 4; ++i) {
+    EXPECT_EQ(now[i].state(), v1::Session::FINISHED) << i << ": " << now[i].state_message();
+    auto traj = c->GetTrajectory(names[i]);
+    ASSERT_TRUE(traj.ok()) << traj.status().ToString();
+    EXPECT_GT(traj->points_size(), 0);
+  }
+  std::vector<v1::SessionEvent> events;
+  Status end = c->Watch(names[0], 0, [&](const v1::SessionEvent& e) {
+    events.push_back(e);
+    return true;
+  });
+  ASSERT_TRUE(end.ok()) << end.ToString();
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events[0].state_change().state(), v1::Session::EXPIRED);
+  EXPECT_EQ(events[0].state_change().message(), now[0].state_message());
+  auto other = c->GetSession(waiting->name());
+  ASSERT_TRUE(other.ok());
+  EXPECT_EQ(other->state(), v1::Session::CREATED);
+  EXPECT_LE((*server)->sessions().StoreBytes(), budget);
+}
+
+// Over the budget with nothing finished to expire (here the schema alone is
+// over a 1-byte budget): the active session is untouched and the log says
+// so once, not at every pass.
+TEST_F(ServerTest, RetentionBudgetNeverTouchesActiveSessionsAndSaysSoOnce) {
+  ::testing::internal::CaptureStderr();
+  auto server = StartServerWithRetention(0, 1);
+  ASSERT_TRUE(server.ok()) << server.status().ToString();
+  auto c =
+      SlapseClient::Connect("127.0.0.1:" + std::to_string((*server)->port()), TestClientOptions());
+  auto waiting = c->CreateSession(UploadRequest());
+  ASSERT_TRUE(waiting.ok()) << waiting.status().ToString();
+  std::this_thread::sleep_for(std::chrono::milliseconds(3500));  // three passes or more
+  auto got = c->GetSession(waiting->name());
+  (*server)->Shutdown();
+  const std::string log = ::testing::internal::GetCapturedStderr();
+  ASSERT_TRUE(got.ok()) << got.status().ToString();
+  EXPECT_EQ(got->state(), v1::Session::CREATED);
+  const std::string said = "no finished session left to expire";
+  const size_t first = log.find(said);
+  ASSERT_NE(first, std::string::npos) << log;
+  EXPECT_EQ(log.find(said, first + 1), std::string::npos) << "said once:\n" << log;
 }
 
 // grpc.health.v1.Health/Check without generated stubs: an empty request (all

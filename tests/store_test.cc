@@ -193,6 +193,69 @@ TEST_F(StoreTest, DeleteAndExpireDropTheResults) {
   EXPECT_GT(*c, *b);
 }
 
+// The bytes of `dir`'s database files on disk (the database and its WAL).
+int64_t FileBytes(const std::string& dir) {
+  int64_t bytes = 0;
+  for (const char* name : {"/slapse.db", "/slapse.db-wal"}) {
+    std::error_code ec;
+    const auto size = std::filesystem::file_size(dir + name, ec);
+    if (!ec) bytes += static_cast<int64_t>(size);
+  }
+  return bytes;
+}
+
+// Store::SizeBytes (the metric's and the retention budget's measure) grows
+// with a session's results and falls as soon as they are expired; Reclaim
+// gives the freed pages back to the file system (a new store is
+// auto_vacuum=INCREMENTAL) and truncates the WAL.
+TEST_F(StoreTest, SizeFollowsTheDataAndReclaimShrinksTheFile) {
+  auto store = OpenOrDie();
+  ASSERT_NE(store, nullptr);
+  const int64_t empty = store->SizeBytes();
+  EXPECT_GT(empty, 0);  // the schema's pages
+  auto a = store->AddSession(NewRow("sessions/a"));
+  auto b = store->AddSession(NewRow("sessions/b"));
+  ASSERT_TRUE(a.ok() && b.ok());
+  // 2000 points and events each: about 0.7 MB per session.
+  for (const int64_t ordinal : {*a, *b}) {
+    for (int step = 0; step < 20; ++step) {
+      StoreStep s;
+      std::vector<v1::SessionEvent> events;
+      for (int i = 0; i < 100; ++i) {
+        const int64_t n = step * 100 + i;
+        s.points.push_back(Point(n, 0.1 * static_cast<double>(n), 0));
+        v1::SessionEvent e;
+        e.set_sequence(static_cast<uint64_t>(n + 1));
+        e.mutable_state_change()->set_message(std::string(300, 'm'));
+        events.push_back(e);
+      }
+      ASSERT_TRUE(store->Commit(ordinal, s, events).ok());
+    }
+  }
+  const int64_t full = store->SizeBytes();
+  EXPECT_GT(full - empty, 2 * 400000) << "two sessions' rows";
+  ASSERT_TRUE(store->Reclaim().ok());
+  const int64_t file_full = FileBytes(dir_);
+  EXPECT_GE(file_full, full);
+
+  v1::Session expired = NewRow("sessions/a");
+  expired.set_state(v1::Session::EXPIRED);
+  ASSERT_TRUE(store->ExpireResults(*a, expired, 2000).ok());
+  const int64_t half = store->SizeBytes();
+  // About half went at once (session b's rows stay).
+  EXPECT_LT(half, full - (full - empty) / 3) << empty << " " << full;
+  EXPECT_GT(half, empty + (full - empty) / 3);
+  ASSERT_TRUE(store->Reclaim().ok());
+  const int64_t file_half = FileBytes(dir_);
+  EXPECT_LT(file_half, file_full - (full - half) / 2) << "the file shrank";
+  EXPECT_EQ(store->SizeBytes(), half);
+
+  // In memory: the same measure.
+  auto memory = Store::Open(kInMemoryDataDir);
+  ASSERT_TRUE(memory.ok());
+  EXPECT_GT((*memory)->SizeBytes(), 0);
+}
+
 TEST_F(StoreTest, OneServerPerDataDirectory) {
   auto first = OpenOrDie();
   ASSERT_NE(first, nullptr);

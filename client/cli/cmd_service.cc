@@ -175,6 +175,13 @@ int RunServe(int argc, char** argv) {
                  "becomes EXPIRED; 0: kept until deleted)")
       ->type_name("S")
       ->capture_default_str();
+  int64_t retention_max_store_mb = o.sessions.retention_max_store_bytes >> 20;
+  app.add_option("--retention-max-store-mb", retention_max_store_mb,
+                 "a size budget for the store, MiB of data (/metrics slapse_store_bytes): while "
+                 "over it, the finished sessions whose end is oldest are EXPIRED (results "
+                 "deleted) until it is under; active sessions are never touched (0: no budget)")
+      ->type_name("MB")
+      ->capture_default_str();
   app.add_option("--tls-cert", o.auth.tls_cert_file,
                  "server certificate chain (PEM); with --tls-key the server speaks TLS only "
                  "(gRPC, and HTTPS on --http-port)")
@@ -249,6 +256,7 @@ int RunServe(int argc, char** argv) {
   }
   for (const Status& s :
        {CheckRange("retention-ttl-s", retention_ttl_s, int64_t{0}, int64_t{1} << 40),
+        CheckRange("retention-max-store-mb", retention_max_store_mb, int64_t{0}, int64_t{1} << 30),
         CheckRange("port", port, int64_t{0}, int64_t{65535}),
         CheckRange("rtsp-port", rtsp_port, int64_t{0}, int64_t{65535}),
         CheckRange("tokens-reload-ms", o.auth.tokens_reload_interval_ms, int64_t{0},
@@ -270,6 +278,7 @@ int RunServe(int argc, char** argv) {
   o.sessions.create_idle_timeout_ms = create_idle_s * 1000;
   o.sessions.upload_stall_timeout_ms = stall_s * 1000;
   o.sessions.retention_ttl_s = retention_ttl_s;
+  o.sessions.retention_max_store_bytes = retention_max_store_mb << 20;
   o.sessions.rtsp_port = static_cast<int>(rtsp_port);
   if (o.sessions.rtsp_push_host.empty()) o.sessions.rtsp_push_host = o.address;
 
@@ -354,7 +363,8 @@ void AddSourceFlags(CLI::App& app, SourceFlags* f) {
       ->type_name("MS")
       ->capture_default_str();
   app.add_option("--reconnect-attempts", f->reconnect_attempts,
-                 "--rtsp-pull: retries per outage (drop, end, unreachable; 0: none)")
+                 "--rtsp-pull: retries per outage (camera lost: connection closed or silent; "
+                 "unreachable; 0: none); a camera that ends its stream finishes the session")
       ->type_name("N")
       ->capture_default_str();
   app.add_option("--reconnect-interval-ms", f->reconnect_interval_ms,

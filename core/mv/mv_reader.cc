@@ -432,6 +432,27 @@ void MvReader::Take(AVFrame* f) {
   Collect(f);
 }
 
+void MvReader::EndInput(int err) {
+  input_done_ = true;
+  if (err == AVERROR_EOF && options_.check_source_at_end) {
+    const int answer = av_read_pause(fmt_);  // 0: the source answered
+    if (answer == AVERROR_EXIT) {
+      err = answer;
+    } else if (answer < 0) {
+      input_status_ = UnavailableError(
+          "the connection was lost after " + std::to_string(stats_.packets) +
+          " packets: the input ended without an end of stream and the source no longer answers");
+      return;
+    }
+  }
+  if (err == AVERROR_EXIT) {
+    input_status_ = CancelledError("reading was interrupted");
+  } else if (err != AVERROR_EOF) {
+    input_status_ = UnavailableError("input failed after " + std::to_string(stats_.packets) +
+                                     " packets: " + AvErrorString(err));
+  }
+}
+
 Status MvReader::Pump() {
   while (ready_.empty() && !decoder_done_) {
     // Drain every frame the decoder has ready.
@@ -469,13 +490,7 @@ Status MvReader::Pump() {
     }
     err = av_read_frame(fmt_, pkt_);
     if (err < 0) {
-      input_done_ = true;
-      if (err == AVERROR_EXIT) {
-        input_status_ = CancelledError("reading was interrupted");
-      } else if (err != AVERROR_EOF) {
-        input_status_ = UnavailableError("input failed after " + std::to_string(stats_.packets) +
-                                         " packets: " + AvErrorString(err));
-      }
+      EndInput(err);
       avcodec_send_packet(dec_, nullptr);  // enter draining mode
       continue;
     }

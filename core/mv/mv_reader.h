@@ -45,6 +45,14 @@ struct MvReaderOptions {
   // vectors; false refuses such a stream with FAILED_PRECONDITION instead.
   bool reencode = true;
   ReencodeOptions reencode_options;
+  // Network inputs: at the input's end (AVERROR_EOF), ask the source whether
+  // it is still there (av_read_pause: RTSP sends PAUSE on its connection).
+  // If it does not answer, the connection was lost and Next() ends
+  // UNAVAILABLE ("the connection was lost ...") instead of OUT_OF_RANGE.
+  // Why: FFmpeg's RTSP demuxer returns AVERROR_EOF both after an RTCP BYE on
+  // every stream (a server that ended its stream) and when the server's TCP
+  // connection closes (a killed camera); only the first still answers.
+  bool check_source_at_end = false;
 };
 
 // True if FFmpeg's decoder for this codec exports motion vectors.
@@ -65,7 +73,8 @@ class MvReader {
   // Fills `frame` with the next frame in display order. Returns OK with a
   // frame; OUT_OF_RANGE at a clean end of stream; DATA_LOSS at the end of a
   // stream that had undecodable parts; CANCELLED if interrupted; UNAVAILABLE
-  // if the network input failed.
+  // if the network input failed (or, with check_source_at_end, its source no
+  // longer answers at the end).
   Status Next(FrameRecord* frame);
 
   const StreamInfo& info() const { return info_; }
@@ -81,6 +90,9 @@ class MvReader {
 
   // Decodes until at least one frame is ready in `ready_` or the stream ends.
   Status Pump();
+  // The demuxer returned `err` (< 0): the input is done; sets input_status_
+  // (check_source_at_end asks the source here).
+  void EndInput(int err);
   void Collect(AVFrame* frame);
   // A decoded frame of the input: its size checked against the stream's
   // (CheckFrameSize), then collected or re-encoded.
