@@ -34,16 +34,22 @@
 //   - per watcher: events delivered vs expected (1..Session.last_sequence at
 //     the end), lost and repeated counted from the sequence numbers
 //     (bench/soak_ledger.h);
-//   - whole sessions compared with the offline run: a session is *whole* when
-//     it ended FINISHED, its camera ran once from creation to end (never
-//     killed, never republished), no server restart happened between its
-//     creation and its end, and its relay (RTP) dropped no packet. A whole
-//     session's trajectory, written as TUM by core/pipeline/result_io.h (as
-//     `slapse export` does), must equal byte for byte the trajectory_tum.txt
-//     of `slapse run` on the same bytes (the drive looped --loops times by
-//     `ffmpeg -stream_loop -c copy`).
-// Exit code 0 when no event was lost, repeated or unexpected and every whole
-// session (at least one) equalled its offline run; 1 otherwise.
+//   - whole sessions compared with the offline run: a session is
+//     *fault-free* when it ended FINISHED, its camera ran once from creation
+//     to end (never killed, never republished), no server restart happened
+//     between its creation and its end, and its relay (RTP) dropped no
+//     packet; *whole* when fault-free and it decoded every frame the camera
+//     sent (the offline run's frame count). A whole session's trajectory,
+//     written as TUM by core/pipeline/result_io.h (as `slapse export` does),
+//     must equal byte for byte the trajectory_tum.txt of `slapse run` on the
+//     same bytes (the drive looped --loops times by `ffmpeg -stream_loop -c
+//     copy`). A fault-free session that is short lost frames on the way
+//     without an injected fault: reported with the drops the kernel counted
+//     on the server's UDP socket (RTP: the reader fell behind and the receive
+//     buffer overflowed); short without such drops is unexplained.
+// Exit code 0 when no event was lost, repeated or unexpected, every whole
+// session (at least one) equalled its offline run and no session was short
+// unexplained; 1 otherwise.
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <poll.h>
@@ -103,9 +109,10 @@ struct SoakOptions {
   double loss_every_s = 45;
   double loss_burst_s = 5;
   double loss_rate = 0.05;
-  double sample_s = 5;   // RSS sample period
-  double warmup_s = 60;  // per server life, before the RSS slope counts
-  double drain_s = 120;  // after duration_s, longest wait for the last sessions
+  double sample_s = 5;          // RSS sample period
+  double warmup_s = 60;         // per server life, before the RSS slope counts
+  double drain_s = 120;         // after duration_s, longest wait for the last sessions
+  int64_t retention_ttl_s = 0;  // serve --retention-ttl-s (0: keep; bounds a day-long store)
   uint64_t seed = 1;
   std::string work_dir;   // default: a fresh temp dir
   std::string json_path;  // JSON lines; empty = none
@@ -122,6 +129,27 @@ bool Active(const v1::Session& s) {
   return s.state() == v1::Session::CREATED || s.state() == v1::Session::RUNNING;
 }
 
+// The kernel's drop count of the UDP sockets bound to local `port`
+// (/proc/net/udp, last column): datagrams lost because the receive buffer was
+// full, i.e. the reader fell behind.
+int64_t UdpDrops(int port) {
+  char want[8];
+  std::snprintf(want, sizeof(want), ":%04X", port);
+  int64_t drops = 0;
+  std::ifstream in("/proc/net/udp");
+  std::string line;
+  std::getline(in, line);  // header
+  while (std::getline(in, line)) {
+    std::istringstream fields(line);
+    std::string slot, local, token, last;
+    fields >> slot >> local;
+    if (local.size() < 5 || local.compare(local.size() - 5, 5, want) != 0) continue;
+    while (fields >> token) last = token;
+    drops += std::atoll(last.c_str());
+  }
+  return drops;
+}
+
 // `slapse serve` on fixed ports and a data directory, restartable.
 class ServeProcess : public testing::LoggedProcess {
  public:
@@ -129,7 +157,8 @@ class ServeProcess : public testing::LoggedProcess {
       : LoggedProcess(
             {o.slapse, "serve", "--address", "127.0.0.1", "--port", std::to_string(port),
              "--data-dir", o.work_dir + "/data", "--max-sessions", std::to_string(o.cameras + 2),
-             "--http-port", "0", "--rtsp-port", std::to_string(rtsp_port)},
+             "--http-port", "0", "--rtsp-port", std::to_string(rtsp_port), "--retention-ttl-s",
+             std::to_string(o.retention_ttl_s)},
             log) {}
   pid_t pid() const { return pid_; }
 };
@@ -222,11 +251,19 @@ struct Life {
   std::vector<std::unique_ptr<Watcher>> watchers;
   std::vector<double> fps, lag_ms;
   v1::Session final;
-  std::string offline = "-";  // "-" not whole, else "equal" or how it differs
-  bool whole() const {
+  std::string offline = "-";     // "-" not whole, else "equal" or how it differs
+  int64_t kernel_udp_drops = 0;  // RTP: the server socket's drops (/proc/net/udp)
+  int64_t reference_frames = 0;  // the frames the camera sent (the offline run's)
+  // No fault touched it: ended FINISHED, its camera ran once from creation to
+  // end, no server restart in between, no packet dropped by the relay.
+  bool fault_free() const {
     return final.state() == v1::Session::FINISHED && !camera_killed && camera_starts == 1 &&
            epoch_at_create == epoch_at_end && relay_dropped == 0;
   }
+  // Whole: fault-free and every frame the camera sent was decoded.
+  bool whole() const { return fault_free() && final.stats().frames() == reference_frames; }
+  // Fault-free but short: frames lost on the way without an injected fault.
+  bool short_stream() const { return fault_free() && !whole(); }
 };
 
 class Soak;
@@ -263,8 +300,11 @@ class CameraSlot {
 
 class Soak {
  public:
-  Soak(SoakOptions o, testing::TestDrive drive, std::string reference_tum)
-      : o_(std::move(o)), drive_(std::move(drive)), reference_tum_(std::move(reference_tum)) {}
+  Soak(SoakOptions o, testing::TestDrive drive, std::string reference_tum, int64_t reference_frames)
+      : o_(std::move(o)),
+        drive_(std::move(drive)),
+        reference_tum_(std::move(reference_tum)),
+        reference_frames_(reference_frames) {}
   int Run();
 
   const SoakOptions& options() const { return o_; }
@@ -293,6 +333,7 @@ class Soak {
   SoakOptions o_;
   testing::TestDrive drive_;
   std::string reference_tum_;
+  int64_t reference_frames_ = 0;
   int port_ = 0, rtsp_port_ = 0;
   std::unique_ptr<ServeProcess> server_;
   double server_started_s_ = 0;
@@ -440,6 +481,9 @@ void CameraSlot::Monitor(Life* life) {
       life->fps.push_back(got->stats().fps());
       life->lag_ms.push_back(got->stats().lag_ms());
       next_sample_s = NowS() + 1.0;
+      if (rtp_) {
+        life->kernel_udp_drops = std::max(life->kernel_udp_drops, UdpDrops(life->rtp_port));
+      }
     }
     std::lock_guard<std::mutex> lock(mu_);
     FfmpegProcess* cam = life->camera_process.get();
@@ -617,7 +661,13 @@ Json WatcherJson(const Watcher& w, uint64_t last_sequence) {
 
 void Soak::Report(Life* life_raw) {
   std::unique_ptr<Life> life(life_raw);
+  life->reference_frames = reference_frames_;
   if (life->whole()) CompareWithOffline(life.get());
+  if (life->short_stream()) {
+    life->offline = "short: " + std::to_string(life->final.stats().frames()) + " of " +
+                    std::to_string(reference_frames_) + " frames, no fault injected (" +
+                    std::to_string(life->kernel_udp_drops) + " drops on the server's UDP socket)";
+  }
   Json watchers = Json::array();
   for (const auto& w : life->watchers) {
     watchers.push_back(WatcherJson(*w, life->final.last_sequence()));
@@ -640,6 +690,7 @@ void Soak::Report(Life* life_raw) {
             {"camera_starts", life->camera_starts},
             {"server_restarts", life->epoch_at_end - life->epoch_at_create},
             {"rtp_packets_dropped", life->relay_dropped},
+            {"kernel_udp_drops", life->kernel_udp_drops},
             {"whole", life->whole()},
             {"offline", life->offline},
             {"watchers", watchers}};
@@ -820,10 +871,12 @@ int Soak::Summarise() {
   PrintRss();
   PrintSessions();
   LedgerTally sum;
-  int whole = 0, equal = 0, drops = 0, retries = 0;
+  int whole = 0, equal = 0, drops = 0, retries = 0, short_udp = 0, short_unexplained = 0;
   std::vector<double> lag_ms, fps;
   for (const auto& l : lives_) {
     whole += l->whole();
+    short_udp += l->short_stream() && l->kernel_udp_drops > 0;
+    short_unexplained += l->short_stream() && l->kernel_udp_drops == 0;
     equal += l->offline == "equal";
     lag_ms.insert(lag_ms.end(), l->lag_ms.begin(), l->lag_ms.end());
     fps.insert(fps.end(), l->fps.begin(), l->fps.end());
@@ -843,17 +896,18 @@ int Soak::Summarise() {
   for (const auto& f : std::filesystem::recursive_directory_iterator(o_.work_dir + "/data", ec)) {
     if (f.is_regular_file(ec)) data_bytes += f.file_size(ec);
   }
-  const bool pass =
-      sum.lost == 0 && sum.repeated == 0 && sum.unexpected == 0 && whole > 0 && equal == whole;
+  const bool pass = sum.lost == 0 && sum.repeated == 0 && sum.unexpected == 0 && whole > 0 &&
+                    equal == whole && short_unexplained == 0;
   std::printf(
-      "\nsummary: %zu sessions, %d whole, %d of them equal to the offline run; events "
+      "\nsummary: %zu sessions, %d whole, %d of them equal to the offline run; fault-free but "
+      "short %d (drops on the server's UDP socket) + %d (unexplained); events "
       "delivered %llu of %llu expected, %llu lost, %llu repeated, %llu unexpected; watcher drops "
       "%d, retries %d; faults: %d camera kills, %d watcher drops, %d server restarts, %d RTP "
       "loss bursts; fps p50 %.1f, lag p50 / p95 / p99 %.0f / %.0f / %.0f ms; data dir %.1f MiB; "
       "%s\n",
-      lives_.size(), whole, equal, static_cast<unsigned long long>(sum.delivered),
-      static_cast<unsigned long long>(sum.expected), static_cast<unsigned long long>(sum.lost),
-      static_cast<unsigned long long>(sum.repeated),
+      lives_.size(), whole, equal, short_udp, short_unexplained,
+      static_cast<unsigned long long>(sum.delivered), static_cast<unsigned long long>(sum.expected),
+      static_cast<unsigned long long>(sum.lost), static_cast<unsigned long long>(sum.repeated),
       static_cast<unsigned long long>(sum.unexpected), drops, retries, faults_[0], faults_[1],
       faults_[2], faults_[3], Percentile(fps, 0.5), Percentile(lag_ms, 0.5),
       Percentile(lag_ms, 0.95), Percentile(lag_ms, 0.99), data_bytes / 1048576.0,
@@ -863,6 +917,8 @@ int Soak::Summarise() {
                    {"sessions", lives_.size()},
                    {"whole", whole},
                    {"equal_offline", equal},
+                   {"short_udp_drops", short_udp},
+                   {"short_unexplained", short_unexplained},
                    {"events_expected", sum.expected},
                    {"events_delivered", sum.delivered},
                    {"events_lost", sum.lost},
@@ -914,6 +970,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--drain-s", o.drain_s, "after the duration, longest wait for the last sessions")
       ->capture_default_str();
+  app.add_option("--retention-ttl-s", o.retention_ttl_s,
+                 "the server's: finished sessions deleted this long after their end (0: kept)")
+      ->capture_default_str();
   app.add_option("--seed", o.seed, "drive and fault victims")->capture_default_str();
   app.add_option("--work-dir", o.work_dir, "drive, data dir, serve.log (default: a temp dir)");
   app.add_option("--json", o.json_path, "JSON lines: rss, fault, session, summary");
@@ -952,21 +1011,33 @@ int main(int argc, char** argv) {
     return 1;
   }
   const std::string reference = slapse::testing::ReadFileBytes(offline + "/trajectory_tum.txt");
+  // run's first line: "input <path> (<codec>, <w>x<h>, <n> frames)".
+  const std::string run_log = slapse::testing::ReadFileBytes(o.work_dir + "/offline.log");
+  const size_t frames_at = run_log.find(" frames)");
+  const size_t comma = run_log.rfind(", ", frames_at);
+  const int64_t reference_frames = frames_at == std::string::npos || comma == std::string::npos
+                                       ? 0
+                                       : std::atoll(run_log.c_str() + comma + 2);
+  if (reference.empty() || reference_frames <= 0) {
+    std::fprintf(stderr, "soak: no offline reference in %s\n", offline.c_str());
+    return 1;
+  }
   double load[3] = {0, 0, 0};
   getloadavg(load, 3);
   std::printf(
       "soak: %d cameras (%d RTP), %d watchers each, %.0f s; drive %.0f s x %d per session "
-      "(320x240 MPEG-2, seed %llu), offline reference %zu poses; faults every: camera kill "
+      "(320x240 MPEG-2, seed %llu), offline reference %lld frames, %zu poses; faults every: camera "
+      "kill "
       "%.0f s, watcher drop %.0f s, server restart %.0f s, RTP loss %.0f s (%.0f s at %.0f%%); "
       "%ld CPUs, load average %.2f at start; work dir %s\n",
       o.cameras, o.rtp_cameras, o.watchers, o.duration_s, o.drive_s, o.loops,
-      static_cast<unsigned long long>(o.seed),
+      static_cast<unsigned long long>(o.seed), static_cast<long long>(reference_frames),
       static_cast<size_t>(std::count(reference.begin(), reference.end(), '\n')),
       o.camera_kill_every_s, o.watcher_drop_every_s, o.server_kill_every_s, o.loss_every_s,
       o.loss_burst_s, 100 * o.loss_rate, sysconf(_SC_NPROCESSORS_ONLN), load[0],
       o.work_dir.c_str());
   std::fflush(stdout);
-  slapse::bench::Soak soak(o, *drive, reference);
+  slapse::bench::Soak soak(o, *drive, reference, reference_frames);
   const int rc = soak.Run();
   getloadavg(load, 3);
   std::printf("load average %.2f at the end\n", load[0]);
