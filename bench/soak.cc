@@ -932,51 +932,75 @@ int Soak::Summarise() {
   return pass ? 0 : 1;
 }
 
+void AddFlags(CLI::App* app, SoakOptions* o) {
+  auto add = [&](const char* name, auto* value, const char* help) {
+    app->add_option(name, *value, help)->capture_default_str();
+  };
+  add("--cameras", &o->cameras, "camera slots (each runs sessions back to back)");
+  add("--rtp-cameras", &o->rtp_cameras, "of them RTP through the lossy relay, the rest RTSP push");
+  add("--watchers", &o->watchers, "watchers per session");
+  add("--duration-s", &o->duration_s, "new sessions and faults until then");
+  add("--drive-s", &o->drive_s, "simulated drive length");
+  add("--loops", &o->loops, "times the drive is sent per session (ffmpeg -stream_loop)");
+  add("--camera-kill-every-s", &o->camera_kill_every_s, "0: never");
+  add("--camera-restart-s", &o->camera_restart_s, "a killed camera's pause");
+  add("--watcher-drop-every-s", &o->watcher_drop_every_s, "0: never");
+  add("--watcher-pause-s", &o->watcher_pause_s, "a dropped watcher's pause");
+  add("--server-kill-every-s", &o->server_kill_every_s, "SIGKILL + restart; 0: never");
+  add("--loss-every-s", &o->loss_every_s, "an RTP loss burst; 0: never");
+  add("--loss-burst-s", &o->loss_burst_s, "a loss burst's length");
+  add("--loss-rate", &o->loss_rate, "RTP packets dropped in a burst, share");
+  add("--sample-s", &o->sample_s, "RSS sample period");
+  add("--warmup-s", &o->warmup_s, "per server life, before the RSS slope counts");
+  add("--drain-s", &o->drain_s, "after the duration, longest wait for the last sessions");
+  add("--retention-ttl-s", &o->retention_ttl_s,
+      "the server's: finished sessions deleted this long after their end (0: kept)");
+  add("--seed", &o->seed, "drive and fault victims");
+  add("--work-dir", &o->work_dir, "drive, data dir, serve.log (default: a temp dir)");
+  add("--json", &o->json_path, "JSON lines: rss, fault, session, summary");
+  add("--slapse", &o->slapse, "the slapse binary");
+}
+
+struct Reference {
+  std::string tum;     // slapse run's trajectory_tum.txt
+  int64_t frames = 0;  // the frames it read
+  size_t poses = 0;
+};
+
+// The offline reference: the bytes a camera sends (the drive --loops times,
+// as ffmpeg -stream_loop makes them), through `slapse run`.
+StatusOr<Reference> MakeReference(const SoakOptions& o, const testing::TestDrive& drive) {
+  const std::string cycle = o.work_dir + "/cycle.ts", offline = o.work_dir + "/offline";
+  const std::string loop_cmd = "ffmpeg -nostdin -loglevel error -y -stream_loop " +
+                               std::to_string(o.loops - 1) + " -i '" + drive.video_path +
+                               "' -c copy '" + cycle + "'";
+  const std::string run_cmd = "'" + o.slapse + "' run '" + cycle + "' --intrinsics '" + drive.dir +
+                              "/intrinsics.json' --out '" + offline + "' --quiet > '" + o.work_dir +
+                              "/offline.log' 2>&1";
+  if (testing::RunCommand(loop_cmd) != 0 || testing::RunCommand(run_cmd) != 0) {
+    return InternalError("the offline reference failed: " + loop_cmd + "; " + run_cmd);
+  }
+  Reference r;
+  r.tum = testing::ReadFileBytes(offline + "/trajectory_tum.txt");
+  std::istringstream lines(r.tum);
+  std::string line;
+  while (std::getline(lines, line)) r.poses += !line.empty() && line[0] != '#';
+  // run's first line: "input <path> (<codec>, <w>x<h>, <n> frames)".
+  const std::string log = testing::ReadFileBytes(o.work_dir + "/offline.log");
+  const size_t frames_at = log.find(" frames)");
+  const size_t comma = frames_at == std::string::npos ? frames_at : log.rfind(", ", frames_at);
+  if (comma != std::string::npos) r.frames = std::atoll(log.c_str() + comma + 2);
+  if (r.poses == 0 || r.frames <= 0) return InternalError("no offline reference in " + offline);
+  return r;
+}
+
 }  // namespace
 }  // namespace slapse::bench
 
 int main(int argc, char** argv) {
-  using slapse::bench::SoakOptions;
-  SoakOptions o;
+  slapse::bench::SoakOptions o;
   CLI::App app("soak: live cameras and watchers against `slapse serve` with faults on a schedule");
-  app.add_option("--cameras", o.cameras, "camera slots (each runs sessions back to back)")
-      ->capture_default_str();
-  app.add_option("--rtp-cameras", o.rtp_cameras,
-                 "of them RTP through the lossy relay, the rest "
-                 "RTSP push")
-      ->capture_default_str();
-  app.add_option("--watchers", o.watchers, "watchers per session")->capture_default_str();
-  app.add_option("--duration-s", o.duration_s, "new sessions and faults until then")
-      ->capture_default_str();
-  app.add_option("--drive-s", o.drive_s, "simulated drive length")->capture_default_str();
-  app.add_option("--loops", o.loops, "times the drive is sent per session (ffmpeg -stream_loop)")
-      ->capture_default_str();
-  app.add_option("--camera-kill-every-s", o.camera_kill_every_s, "0: never")->capture_default_str();
-  app.add_option("--camera-restart-s", o.camera_restart_s, "a killed camera's pause")
-      ->capture_default_str();
-  app.add_option("--watcher-drop-every-s", o.watcher_drop_every_s, "0: never")
-      ->capture_default_str();
-  app.add_option("--watcher-pause-s", o.watcher_pause_s, "a dropped watcher's pause")
-      ->capture_default_str();
-  app.add_option("--server-kill-every-s", o.server_kill_every_s, "SIGKILL + restart; 0: never")
-      ->capture_default_str();
-  app.add_option("--loss-every-s", o.loss_every_s, "an RTP loss burst; 0: never")
-      ->capture_default_str();
-  app.add_option("--loss-burst-s", o.loss_burst_s, "")->capture_default_str();
-  app.add_option("--loss-rate", o.loss_rate, "RTP packets dropped in a burst, share")
-      ->capture_default_str();
-  app.add_option("--sample-s", o.sample_s, "RSS sample period")->capture_default_str();
-  app.add_option("--warmup-s", o.warmup_s, "per server life, before the RSS slope counts")
-      ->capture_default_str();
-  app.add_option("--drain-s", o.drain_s, "after the duration, longest wait for the last sessions")
-      ->capture_default_str();
-  app.add_option("--retention-ttl-s", o.retention_ttl_s,
-                 "the server's: finished sessions deleted this long after their end (0: kept)")
-      ->capture_default_str();
-  app.add_option("--seed", o.seed, "drive and fault victims")->capture_default_str();
-  app.add_option("--work-dir", o.work_dir, "drive, data dir, serve.log (default: a temp dir)");
-  app.add_option("--json", o.json_path, "JSON lines: rss, fault, session, summary");
-  app.add_option("--slapse", o.slapse, "the slapse binary")->capture_default_str();
+  slapse::bench::AddFlags(&app, &o);
   CLI11_PARSE(app, argc, argv);
   if (o.cameras < 1 || o.rtp_cameras < 0 || o.rtp_cameras > o.cameras || o.loops < 1 ||
       o.watchers < 0 || o.drive_s <= 0) {
@@ -986,58 +1010,30 @@ int main(int argc, char** argv) {
     return 2;
   }
   signal(SIGPIPE, SIG_IGN);
-  namespace fs = std::filesystem;
   if (o.work_dir.empty()) o.work_dir = slapse::testing::MakeTempDir("soak");
-  fs::create_directories(o.work_dir);
-
+  std::filesystem::create_directories(o.work_dir);
   auto drive = slapse::testing::SimulateTestDrive(
       "soak_drive", slapse::testing::SmallMpeg2DriveOptions(o.seed, o.drive_s));
-  if (!drive.ok()) {
-    std::fprintf(stderr, "soak: %s\n", drive.status().ToString().c_str());
-    return 1;
-  }
-  // The offline reference: the bytes a camera sends (the drive --loops times,
-  // as ffmpeg -stream_loop makes them), through `slapse run`.
-  const std::string cycle = o.work_dir + "/cycle.ts", offline = o.work_dir + "/offline";
-  const std::string loop_cmd = "ffmpeg -nostdin -loglevel error -y -stream_loop " +
-                               std::to_string(o.loops - 1) + " -i '" + drive->video_path +
-                               "' -c copy '" + cycle + "'";
-  const std::string run_cmd = "'" + o.slapse + "' run '" + cycle + "' --intrinsics '" + drive->dir +
-                              "/intrinsics.json' --out '" + offline + "' --quiet > '" + o.work_dir +
-                              "/offline.log' 2>&1";
-  if (slapse::testing::RunCommand(loop_cmd) != 0 || slapse::testing::RunCommand(run_cmd) != 0) {
-    std::fprintf(stderr, "soak: the offline reference failed: %s; %s\n", loop_cmd.c_str(),
-                 run_cmd.c_str());
-    return 1;
-  }
-  const std::string reference = slapse::testing::ReadFileBytes(offline + "/trajectory_tum.txt");
-  // run's first line: "input <path> (<codec>, <w>x<h>, <n> frames)".
-  const std::string run_log = slapse::testing::ReadFileBytes(o.work_dir + "/offline.log");
-  const size_t frames_at = run_log.find(" frames)");
-  const size_t comma = run_log.rfind(", ", frames_at);
-  const int64_t reference_frames = frames_at == std::string::npos || comma == std::string::npos
-                                       ? 0
-                                       : std::atoll(run_log.c_str() + comma + 2);
-  if (reference.empty() || reference_frames <= 0) {
-    std::fprintf(stderr, "soak: no offline reference in %s\n", offline.c_str());
+  auto reference = drive.ok() ? slapse::bench::MakeReference(o, *drive)
+                              : slapse::StatusOr<slapse::bench::Reference>(drive.status());
+  if (!reference.ok()) {
+    std::fprintf(stderr, "soak: %s\n", reference.status().ToString().c_str());
     return 1;
   }
   double load[3] = {0, 0, 0};
   getloadavg(load, 3);
   std::printf(
       "soak: %d cameras (%d RTP), %d watchers each, %.0f s; drive %.0f s x %d per session "
-      "(320x240 MPEG-2, seed %llu), offline reference %lld frames, %zu poses; faults every: camera "
-      "kill "
-      "%.0f s, watcher drop %.0f s, server restart %.0f s, RTP loss %.0f s (%.0f s at %.0f%%); "
-      "%ld CPUs, load average %.2f at start; work dir %s\n",
+      "(320x240 MPEG-2, seed %llu), offline reference %lld frames, %zu poses; faults every: "
+      "camera kill %.0f s, watcher drop %.0f s, server restart %.0f s, RTP loss %.0f s (%.0f s at "
+      "%.0f%%); %ld CPUs, load average %.2f at start; work dir %s\n",
       o.cameras, o.rtp_cameras, o.watchers, o.duration_s, o.drive_s, o.loops,
-      static_cast<unsigned long long>(o.seed), static_cast<long long>(reference_frames),
-      static_cast<size_t>(std::count(reference.begin(), reference.end(), '\n')),
-      o.camera_kill_every_s, o.watcher_drop_every_s, o.server_kill_every_s, o.loss_every_s,
-      o.loss_burst_s, 100 * o.loss_rate, sysconf(_SC_NPROCESSORS_ONLN), load[0],
+      static_cast<unsigned long long>(o.seed), static_cast<long long>(reference->frames),
+      reference->poses, o.camera_kill_every_s, o.watcher_drop_every_s, o.server_kill_every_s,
+      o.loss_every_s, o.loss_burst_s, 100 * o.loss_rate, sysconf(_SC_NPROCESSORS_ONLN), load[0],
       o.work_dir.c_str());
   std::fflush(stdout);
-  slapse::bench::Soak soak(o, *drive, reference, reference_frames);
+  slapse::bench::Soak soak(o, *drive, reference->tum, reference->frames);
   const int rc = soak.Run();
   getloadavg(load, 3);
   std::printf("load average %.2f at the end\n", load[0]);
