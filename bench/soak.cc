@@ -45,8 +45,9 @@
 //     same bytes (the drive looped --loops times by `ffmpeg -stream_loop -c
 //     copy`). A fault-free session that is short lost frames on the way
 //     without an injected fault: reported with the drops the kernel counted
-//     on the server's UDP socket (RTP: the reader fell behind and the receive
-//     buffer overflowed); short without such drops is unexplained.
+//     on the server's and the relay's UDP sockets (/proc/net/udp: a reader
+//     fell behind and its receive buffer overflowed); short without such
+//     drops is unexplained.
 // Exit code 0 when no event was lost, repeated or unexpected, every whole
 // session (at least one) equalled its offline run and no session was short
 // unexplained; 1 otherwise.
@@ -172,6 +173,8 @@ class RtpRelay {
     for (int i = 0; i < 2; ++i) {
       fd_[i] = socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
       sockaddr_in sa = Loopback(port_ + i);
+      const int rcvbuf_bytes = 4 << 20;  // capped by net.core.rmem_max
+      setsockopt(fd_[i], SOL_SOCKET, SO_RCVBUF, &rcvbuf_bytes, sizeof(rcvbuf_bytes));
       bind(fd_[i], reinterpret_cast<sockaddr*>(&sa), sizeof(sa));
     }
     thread_ = std::thread([this] { Loop(); });
@@ -189,6 +192,9 @@ class RtpRelay {
     loss_until_s_ = until_s;
   }
   uint64_t dropped() const { return dropped_; }
+  // Datagrams the kernel dropped on the relay's own RTP socket (its buffer
+  // full: this process fell behind), so far.
+  int64_t socket_drops() const { return UdpDrops(port_); }
 
  private:
   static sockaddr_in Loopback(int port) {
@@ -253,6 +259,7 @@ struct Life {
   v1::Session final;
   std::string offline = "-";     // "-" not whole, else "equal" or how it differs
   int64_t kernel_udp_drops = 0;  // RTP: the server socket's drops (/proc/net/udp)
+  int64_t relay_socket_drops_at_create = 0, relay_socket_drops = 0;  // the relay's socket
   int64_t reference_frames = 0;  // the frames the camera sent (the offline run's)
   // No fault touched it: ended FINISHED, its camera ran once from creation to
   // end, no server restart in between, no packet dropped by the relay.
@@ -409,7 +416,10 @@ bool CameraSlot::Create(Life* life) {
   }
   life->epoch_at_create = soak_->epoch();
   life->created_s = NowS();
-  if (relay_) life->relay_dropped_at_create = relay_->dropped();
+  if (relay_) {
+    life->relay_dropped_at_create = relay_->dropped();
+    life->relay_socket_drops_at_create = relay_->socket_drops();
+  }
   auto created = soak_->client().CreateSession(req);
   if (!created.ok()) {
     if (soak_->epoch() == life->epoch_at_create) {
@@ -509,6 +519,7 @@ void CameraSlot::End(Life* life) {
   if (relay_) {
     relay_->SetTarget(0);
     life->relay_dropped = relay_->dropped() - life->relay_dropped_at_create;
+    life->relay_socket_drops = relay_->socket_drops() - life->relay_socket_drops_at_create;
   }
   for (auto& w : life->watchers) w->thread.join();
   for (;;) {  // the final state and last_sequence, the server maybe restarting
@@ -665,8 +676,10 @@ void Soak::Report(Life* life_raw) {
   if (life->whole()) CompareWithOffline(life.get());
   if (life->short_stream()) {
     life->offline = "short: " + std::to_string(life->final.stats().frames()) + " of " +
-                    std::to_string(reference_frames_) + " frames, no fault injected (" +
-                    std::to_string(life->kernel_udp_drops) + " drops on the server's UDP socket)";
+                    std::to_string(reference_frames_) +
+                    " frames, no fault injected (UDP socket drops: server " +
+                    std::to_string(life->kernel_udp_drops) + ", relay " +
+                    std::to_string(life->relay_socket_drops) + ")";
   }
   Json watchers = Json::array();
   for (const auto& w : life->watchers) {
@@ -691,6 +704,7 @@ void Soak::Report(Life* life_raw) {
             {"server_restarts", life->epoch_at_end - life->epoch_at_create},
             {"rtp_packets_dropped", life->relay_dropped},
             {"kernel_udp_drops", life->kernel_udp_drops},
+            {"relay_socket_drops", life->relay_socket_drops},
             {"whole", life->whole()},
             {"offline", life->offline},
             {"watchers", watchers}};
@@ -875,8 +889,9 @@ int Soak::Summarise() {
   std::vector<double> lag_ms, fps;
   for (const auto& l : lives_) {
     whole += l->whole();
-    short_udp += l->short_stream() && l->kernel_udp_drops > 0;
-    short_unexplained += l->short_stream() && l->kernel_udp_drops == 0;
+    const bool udp_drops = l->kernel_udp_drops + l->relay_socket_drops > 0;
+    short_udp += l->short_stream() && udp_drops;
+    short_unexplained += l->short_stream() && !udp_drops;
     equal += l->offline == "equal";
     lag_ms.insert(lag_ms.end(), l->lag_ms.begin(), l->lag_ms.end());
     fps.insert(fps.end(), l->fps.begin(), l->fps.end());
@@ -900,7 +915,7 @@ int Soak::Summarise() {
                     equal == whole && short_unexplained == 0;
   std::printf(
       "\nsummary: %zu sessions, %d whole, %d of them equal to the offline run; fault-free but "
-      "short %d (drops on the server's UDP socket) + %d (unexplained); events "
+      "short %d (UDP socket drops) + %d (unexplained); events "
       "delivered %llu of %llu expected, %llu lost, %llu repeated, %llu unexpected; watcher drops "
       "%d, retries %d; faults: %d camera kills, %d watcher drops, %d server restarts, %d RTP "
       "loss bursts; fps p50 %.1f, lag p50 / p95 / p99 %.0f / %.0f / %.0f ms; data dir %.1f MiB; "
