@@ -45,6 +45,7 @@ extern "C" {
 
 #include "api/convert.h"
 #include "bench/rss.h"
+#include "bench/stats.h"
 #include "client/lib/client.h"
 #include "core/common/intrinsics_io.h"
 #include "lab/sim/simulate.h"
@@ -55,6 +56,7 @@ namespace {
 namespace v1 = slapse::v1;
 using google::protobuf::util::TimeUtil;
 using slapse::Status;
+using slapse::bench::Percentile;
 
 // The wall clock as a Timestamp, to the nanosecond (as the server stamps).
 google::protobuf::Timestamp Now() {
@@ -84,12 +86,6 @@ pid_t PublishWithRetry(const std::string& video, const std::string& url) {
     if (waitpid(pid, &status, WNOHANG) == 0) return pid;  // running: connected
   }
   return -1;
-}
-
-double Percentile(std::vector<double> v, double q) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v[std::min(v.size() - 1, static_cast<size_t>(q * (v.size() - 1) + 0.5))];
 }
 
 struct SessionOutcome {
