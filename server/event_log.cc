@@ -51,6 +51,7 @@ uint64_t EventLog::Expire(v1::SessionEvent event, const Persist& persist) {
 void EventLog::Close() {
   std::lock_guard<std::mutex> lock(mu_);
   closed_ = true;
+  if (backfill_) std::deque<v1::SessionEvent>().swap(ring_);  // frees it; Read backfills
   changed_.notify_all();
 }
 
@@ -87,6 +88,11 @@ Status EventLog::Read(uint64_t after_sequence, size_t max_events,
   }
   if (closed_ && after_sequence + (out->size() - before) >= last_sequence_) *ended = true;
   return Status::Ok();
+}
+
+size_t EventLog::events_in_memory() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return ring_.size();
 }
 
 uint64_t EventLog::last_sequence() const {

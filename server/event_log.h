@@ -52,7 +52,10 @@ class EventLog {
   // Retention: the log keeps only `event` (appended even though the log is
   // closed), persisted by `persist`. Returns its sequence.
   uint64_t Expire(v1::SessionEvent event, const Persist& persist);
-  // No more events will come; watchers end after draining.
+  // No more events will come; watchers end after draining. With a store
+  // behind it the ring's memory is released (watchers drain from the store,
+  // which holds every event): a finished session costs no event memory, so
+  // a server's memory does not grow with the sessions it has finished.
   void Close();
 
   // Copies up to `max_events` events with sequence > after_sequence into
@@ -66,6 +69,8 @@ class EventLog {
               bool* ended);
 
   uint64_t last_sequence() const;
+  // Events held in memory (the ring).
+  size_t events_in_memory() const;
 
  private:
   uint64_t AppendLocked(std::vector<v1::SessionEvent> events, const Persist& persist);

@@ -53,7 +53,7 @@ SessionRunner::SessionRunner(std::shared_ptr<Session> session, size_t final_pose
   // Resumed after a restart: the counters go on, and the new pipeline's
   // frames follow the old ones on the timeline, the outage's wall time later.
   const v1::SessionStats& st = session_->proto.stats();
-  frames_ = st.frames();
+  frames_ = frames_before_ = st.frames();
   pairs_ = st.anchor_pairs();
   tracked_ = st.tracked_pairs();
   last_index_ = session_->resumed_last_index;
@@ -268,8 +268,10 @@ void SessionRunner::Publish(const FrameRecord& frame, const PipelineStep* step) 
     std::lock_guard<std::mutex> lock(session_->mu);
     v1::SessionStats* st = session_->proto.mutable_stats();
     st->set_frames(frames_);
-    // No figure from a blip: 0 until 10 frames or 0.25 s.
-    st->set_fps(wall_s > 0 && (frames_ >= 10 || wall_s >= 0.25) ? frames_ / wall_s : 0.0);
+    // No figure from a blip: 0 until 10 frames or 0.25 s. Only this runner's
+    // frames over its own time (a resumed session's earlier ones are not).
+    const int64_t run_frames = frames_ - frames_before_;
+    st->set_fps(wall_s > 0 && (run_frames >= 10 || wall_s >= 0.25) ? run_frames / wall_s : 0.0);
     st->set_lag_ms(std::max(0.0, wall_s - frame.timestamp_s) * 1e3);
     st->set_stream_time_s(frame.timestamp_s);
     // Read only by a FINISHED ending without poses: not kept once there are poses

@@ -79,6 +79,7 @@ class SessionRunner {
   Clock::time_point start_;                                  // when the pipeline was made
   std::map<int64_t, google::protobuf::Timestamp> received_;  // frame index -> when read
   int64_t frames_ = 0;                                       // over the session's life
+  int64_t frames_before_ = 0;  // of frames_, decoded before a restart (not by this runner)
   size_t notes_reported_ = 0;  // the connection's reader notes already in stream_report
   int64_t pairs_ = 0, tracked_ = 0;
   int64_t index_offset_ = 0;       // added to a connection's frame indices

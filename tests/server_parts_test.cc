@@ -11,6 +11,7 @@
 #include <thread>
 #include <vector>
 
+#include "server/event_log.h"
 #include "server/ingest_source.h"
 #include "server/session.h"
 #include "server/udp_ports.h"
@@ -164,6 +165,46 @@ TEST(IngestSourceTest, RtpSdpTimeoutsFailBeforeVideoAndFinishAfter) {
   EXPECT_EQ(s->Snapshot().state(), v1::Session::FINISHED);
 }
 
+// A closed log with a store behind it holds no events in memory, and a
+// watcher from any cursor still reads every event, then the end.
+TEST(EventLogTest, ClosingReleasesTheRingAndReadsGoOnFromTheStore) {
+  std::vector<v1::SessionEvent> store;  // what the store would hold, in order
+  EventLog log(64);
+  log.SetStore(
+      [&](const std::vector<v1::SessionEvent>& e) {
+        store.insert(store.end(), e.begin(), e.end());
+      },
+      [&](uint64_t after, size_t max, std::vector<v1::SessionEvent>* out) {
+        for (const v1::SessionEvent& e : store) {
+          if (e.sequence() > after && max > 0) {
+            out->push_back(e);
+            --max;
+          }
+        }
+        return Status::Ok();
+      });
+  for (int i = 0; i < 100; ++i) log.Append(v1::SessionEvent());
+  EXPECT_EQ(log.events_in_memory(), 64u);
+  log.Close();
+  EXPECT_EQ(log.events_in_memory(), 0u);
+  EXPECT_EQ(log.last_sequence(), 100u);
+  for (uint64_t cursor : {0, 40, 99}) {
+    std::vector<v1::SessionEvent> got;
+    bool ended = false;
+    while (!ended) {
+      ASSERT_TRUE(
+          log.Read(cursor + got.size(), 30, std::chrono::steady_clock::now(), &got, &ended).ok());
+    }
+    ASSERT_EQ(got.size(), 100 - cursor);
+    for (size_t i = 0; i < got.size(); ++i) EXPECT_EQ(got[i].sequence(), cursor + 1 + i);
+  }
+  // Without a store the ring is all there is: kept.
+  EventLog alone(8);
+  for (int i = 0; i < 5; ++i) alone.Append(v1::SessionEvent());
+  alone.Close();
+  EXPECT_EQ(alone.events_in_memory(), 5u);
+}
+
 TEST(UdpPortRangeTest, ParsesWholePairRangesAndNamesTheRuleBroken) {
   auto any = ParseUdpPortRange("any");
   ASSERT_TRUE(any.ok());
@@ -245,10 +286,11 @@ TEST(IngestSourceTest, RtspPullBacksOffThenGivesUp) {
   // 100, 200, then capped at 250 ms.
   EXPECT_EQ(source->AfterConnection(s.get(), refused), std::optional<int>(100));
   EXPECT_EQ(source->AfterConnection(s.get(), refused), std::optional<int>(200));
-  // Frames flowing end the outage: the next one starts again at 100 ms.
+  // Frames flowing end the outage: the next one (a lost camera: the
+  // connection closed and no longer answers) starts again at 100 ms.
   ConnectionEnd ended;
   ended.opened = true;
-  ended.status = OutOfRangeError("eof");
+  ended.status = UnavailableError("the connection was lost after 40 packets");
   ended.frames = 5;
   EXPECT_EQ(source->AfterConnection(s.get(), ended), std::optional<int>(100));
   EXPECT_EQ(source->AfterConnection(s.get(), refused), std::optional<int>(200));
