@@ -82,6 +82,12 @@ class RtspPushTest : public ::testing::Test {
     }
   }
 
+  // --gtest_repeat runs SetUpTestSuite again.
+  static void TearDownTestSuite() {
+    drives_.clear();
+    offline_.clear();
+  }
+
   void SetUp() override {
     ASSERT_EQ(drives_.size(), 2u);
     for (const Offline& o : offline_) ASSERT_GE(o.trajectory.size(), 5u);  // not vacuous
