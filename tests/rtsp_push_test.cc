@@ -256,7 +256,7 @@ TEST_F(RtspPushTest, TwoPublishersOnOnePortEachEqualTheirOfflineRun) {
 // rtspclientsink's READY -> NULL cancels its queued TEARDOWN (the session
 // ended "lost without a TEARDOWN ... after 89 frames"); and the session's end
 // closed the publisher's connection before gst-rtsp-server had sent the
-// TEARDOWN's 200 OK. Left (2 failures in 20 runs under 3 `yes` loops):
+// TEARDOWN's 200 OK. Left (2 failures in 20 runs, with or without 3 `yes` loops):
 // (a) rtspclientsink never posts EOS: its RTP appsink got EOS, its RTCP
 //     appsink never did after rtpsession sent the BYE ("is_eos: sink
 //     'appsink1' did not post EOS yet" for 60 s), so the script never sends
