@@ -500,7 +500,12 @@ void RtspIngest::UnmountOwn(const std::string& session_name) {
     gst_rtsp_mount_points_remove_factory(im->mounts, e.mount_path.c_str());
     gst_rtsp_auth_remove_digest(im->auth, e.user.c_str());
     e.mount->bytes()->Close(CancelledError("the session's RTSP mount was removed"));
-    if (e.publisher != nullptr) gst_rtsp_client_close(e.publisher);
+    // A publisher that sent TEARDOWN is left to gst-rtsp-server, which is
+    // still answering it: the session ends as soon as the stream has
+    // drained, and closing the connection then could cut that 200 OK off
+    // (the publisher would report a failed TEARDOWN; seen under CPU load).
+    // It closes its connection itself. Any other publisher is disconnected.
+    if (e.publisher != nullptr && !e.mount->saw_teardown()) gst_rtsp_client_close(e.publisher);
     Impl::ReleasePublisher(&e);
   });
 }

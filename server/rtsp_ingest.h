@@ -111,7 +111,9 @@ class RtspIngest {
   // are unique); null if none.
   static std::shared_ptr<RtspPublishMount> FindMount(const std::string& session_name);
   // Unmounts a session wherever it is mounted: the path then answers 404,
-  // its publisher (if any) is disconnected, its bytes end. Idempotent.
+  // its publisher (if any) is disconnected unless it sent TEARDOWN (it is
+  // being answered and closes its connection itself), its bytes end.
+  // Idempotent.
   static void Unmount(const std::string& session_name);
 
   struct Impl;
