@@ -6,7 +6,8 @@
 //   build/bench/service_bench --sessions 4 --ingest upload --loops 15   # 5 min each
 //
 // Each session count runs in a fresh process of its own (so its memory figures
-// are its own): an in-process server (port 0), N live sessions, each fed the
+// are its own): an in-process server (port 0, its store in a fresh data
+// directory on disk, as `slapse serve`), N live sessions, each fed the
 // same simulated drive (MPEG-2 IBBBP, 30 fps) at real time by its own
 // `ffmpeg -re` (--loops times in a row), and a watcher per session on the real
 // client library. --ingest push (default): RTSP push sessions, ffmpeg
@@ -276,6 +277,12 @@ int RunChild(const RunConfig& c, const slapse::Intrinsics& k) {
   o.address = "127.0.0.1";
   o.port = 0;
   o.sessions.max_sessions = c.sessions;
+  // A data directory on disk, as `slapse serve` has: an in-memory store would
+  // hold every event and pose in the process and grow with the run.
+  const std::filesystem::path data_dir =
+      std::filesystem::temp_directory_path() / ("slapse_service_bench_" + std::to_string(getpid()));
+  std::filesystem::remove_all(data_dir);
+  o.sessions.data_dir = data_dir.string();
   if (c.event_ring > 0) o.sessions.event_ring_capacity = static_cast<size_t>(c.event_ring);
   auto server = slapse::server::SlapseServer::Start(o);
   if (!server.ok()) {
@@ -334,6 +341,7 @@ int RunChild(const RunConfig& c, const slapse::Intrinsics& k) {
     if (pid > 0) waitpid(pid, nullptr, 0);
   }
   (*server)->Shutdown();
+  std::filesystem::remove_all(data_dir);
   Report(c, out, idle_rss_kb, idle_anon_kb, Summarize(samples, c.warmup_s));
   return 0;
 }
