@@ -133,6 +133,11 @@ int RunServe(int argc, char** argv) {
                  "raise it for a stream whose facts come late; 0: FFmpeg's 5 MB)")
       ->type_name("KB")
       ->capture_default_str();
+  app.add_option("--malloc-arena-max", o.malloc_arena_max,
+                 "glibc malloc arenas of the process (fewer keep less freed memory per "
+                 "session thread; 0: glibc's default, 8 per core)")
+      ->type_name("N")
+      ->capture_default_str();
   int64_t create_idle_s = o.sessions.create_idle_timeout_ms / 1000;
   int64_t stall_s = o.sessions.upload_stall_timeout_ms / 1000;
   app.add_option("--create-idle-timeout-s", create_idle_s,
