@@ -11,7 +11,8 @@ IngestSource::IngestSource(int start_timeout_ms, int receive_timeout_ms)
                                                  : api::kDefaultReceiveTimeoutMs) {}
 
 std::unique_ptr<IngestSource> IngestSource::Make(const v1::Session& request,
-                                                 std::shared_ptr<UploadQueue> upload) {
+                                                 std::shared_ptr<UploadQueue> upload,
+                                                 ReaderSettings settings) {
   std::unique_ptr<IngestSource> source;
   switch (request.source_case()) {
     case v1::Session::kRtspPull:
@@ -29,8 +30,11 @@ std::unique_ptr<IngestSource> IngestSource::Make(const v1::Session& request,
   }
   source->reader_options_ = api::StreamOptionsFromProto(request.stream_options());
   // The dashboard's overlays draw over the anchors' luma (server/frame_overlays.h;
-  // the runner keeps an anchor's only while someone asks, and drops the rest).
+  // the runner keeps an anchor's only while someone asks, and drops the rest);
+  // with `luma_wanted` the reader copies none while nobody asks.
   source->reader_options_.keep_luma = true;
+  source->reader_options_.luma_wanted = std::move(settings.luma_wanted);
+  source->reader_options_.probe_bytes = settings.probe_bytes;
   return source;
 }
 

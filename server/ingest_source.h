@@ -39,12 +39,20 @@ struct ConnectionEnd {
   int64_t session_frames = 0;  // frames over the session's life
 };
 
+// What the server sets on every session's reader, besides the session's own
+// stream options.
+struct ReaderSettings {
+  int64_t probe_bytes = 0;            // MvReaderOptions::probe_bytes
+  std::function<bool()> luma_wanted;  // MvReaderOptions::luma_wanted
+};
+
 class IngestSource {
  public:
   // The source of `request` (a validated session, ingest_url assigned);
   // `upload` feeds an upload session.
   static std::unique_ptr<IngestSource> Make(const v1::Session& request,
-                                            std::shared_ptr<UploadQueue> upload);
+                                            std::shared_ptr<UploadQueue> upload,
+                                            ReaderSettings settings = {});
   virtual ~IngestSource() = default;
 
   // Network sources have deadlines; an upload does not.

@@ -5,6 +5,8 @@
 #include <grpcpp/security/server_credentials.h>
 #include <grpcpp/server_builder.h>
 
+#include <malloc.h>
+
 #include <algorithm>
 #include "api/session_name.h"
 #include "server/dashboard.h"
@@ -100,6 +102,10 @@ StatusOr<std::unique_ptr<SlapseServer>> SlapseServer::Start(const ServerOptions&
   if (options.sessions.retention_max_store_bytes < 0) {
     return InvalidArgumentError("retention_max_store_bytes must be >= 0 (0: no budget)");
   }
+  if (options.malloc_arena_max < 0) {
+    return InvalidArgumentError("malloc_arena_max must be >= 0 (0: glibc's default)");
+  }
+  if (options.malloc_arena_max > 0) mallopt(M_ARENA_MAX, options.malloc_arena_max);
   if (options.http_port < ServerOptions::kAnyFreePort || options.http_port > 65535) {
     return InvalidArgumentError("http_port must be in [0, 65535] (or kAnyFreePort), got " +
                                 std::to_string(options.http_port));

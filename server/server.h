@@ -59,6 +59,12 @@ struct ServerOptions {
   std::vector<std::string> peers;
   std::string peer_tls_ca_file;
   double peer_timeout_s = 3.0;
+  // glibc malloc arenas of the whole process (mallopt M_ARENA_MAX, set by
+  // Start): glibc's default, 8 per core, gives a session's threads (reader,
+  // record pipeline, gRPC) arenas of their own, each keeping its freed
+  // memory; 2 took ~1 MiB per live session off the RSS at 4 sessions with no
+  // fps lost (docs/BENCHMARKS.md, issue 17). 0 = glibc's default.
+  int malloc_arena_max = 2;
 };
 
 class SlapseServer {

@@ -136,7 +136,9 @@ void SessionManager::Restore(StoredSession stored) {
                         ", in a new world frame)");
     }
   }
-  pool_.Submit([s, keep = options_.final_poses_in_memory] { SessionRunner(s, keep).Run(); });
+  pool_.Submit([s, keep = options_.final_poses_in_memory, probe = options_.reader_probe_bytes] {
+    SessionRunner(s, keep, probe).Run();
+  });
 }
 
 int SessionManager::ActiveCountLocked() const {
@@ -194,7 +196,9 @@ StatusOr<v1::Session> SessionManager::Create(const v1::Session& request) {
     sessions_[*ordinal] = s;
     ordinals_[s->name] = *ordinal;
     // Queued under mu_, so a Shutdown after this still runs (and ends) it.
-    pool_.Submit([s, keep = options_.final_poses_in_memory] { SessionRunner(s, keep).Run(); });
+    pool_.Submit([s, keep = options_.final_poses_in_memory, probe = options_.reader_probe_bytes] {
+      SessionRunner(s, keep, probe).Run();
+    });
   }
   v1::Session created = s->Snapshot();
   // The publish credentials: in this response only, never stored.

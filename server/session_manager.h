@@ -52,8 +52,11 @@ struct SessionManagerOptions {
   // their own start_timeout_ms / receive_timeout_ms instead.
   int64_t create_idle_timeout_ms = 10 * 60 * 1000;
   int64_t upload_stall_timeout_ms = 60 * 1000;
-  // Events kept per session for watchers to resume from.
-  size_t event_ring_capacity = 4096;
+  // Events kept in RAM per session for watchers to resume from; a watcher
+  // further behind reads on from the store. A live 30 fps session emits ~35
+  // events/s, so 1024 are its last ~30 s, ~0.5 MiB (4096 held ~2 MiB more
+  // per session, reached after two minutes of stream).
+  size_t event_ring_capacity = 1024;
   // RTSP push: the address the server's one RTSP ingest port binds and that
   // ingest URLs name (server/rtsp_ingest.h).
   std::string rtsp_push_host = "127.0.0.1";
@@ -85,6 +88,12 @@ struct SessionManagerOptions {
   // longer held (Pipeline::ForgetFinal): the store has them, and a session's
   // memory does not grow with its length.
   size_t final_poses_in_memory = 256;
+  // Bytes a session's reader may read to identify its stream
+  // (MvReaderOptions::probe_bytes). FFmpeg's default, 5 MB, is also the
+  // buffer the MPEG-TS demuxer keeps at the start of every byte stream (RTSP
+  // push, upload): 5 MB per session that a live 640x480 stream does not need
+  // (its stream facts are read from the first ~0.1 s). 0 = FFmpeg's default.
+  int64_t reader_probe_bytes = 1 << 20;
   // The replica this server is in a cluster (api/session_name.h): new
   // sessions are named "sessions/<replica_id>-<random>"; a call for a
   // session of another replica is NOT_FOUND naming both (misrouted). "" =

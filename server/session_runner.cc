@@ -45,9 +45,14 @@ v1::PlaneEvent::Kind KindToProto(PlaneChange::Kind kind) {
 
 }  // namespace
 
-SessionRunner::SessionRunner(std::shared_ptr<Session> session, size_t final_poses_in_memory)
+SessionRunner::SessionRunner(std::shared_ptr<Session> session, size_t final_poses_in_memory,
+                             int64_t probe_bytes)
     : session_(std::move(session)), final_poses_in_memory_(final_poses_in_memory) {
-  source_ = IngestSource::Make(session_->Snapshot(), session_->upload);
+  ReaderSettings reader;
+  reader.probe_bytes = probe_bytes;
+  // A frame's luma only while the dashboard shows its overlays (KeepForOverlays).
+  reader.luma_wanted = [overlays = session_->overlays] { return overlays->Wanted(); };
+  source_ = IngestSource::Make(session_->Snapshot(), session_->upload, std::move(reader));
   std::lock_guard<std::mutex> lock(session_->mu);
   if (session_->resumed_last_index < 0) return;
   // Resumed after a restart: the counters go on, and the new pipeline's

@@ -29,7 +29,9 @@ namespace slapse::server {
 class SessionRunner {
  public:
   // final_poses_in_memory: SessionManagerOptions's (Pipeline::ForgetFinal).
-  SessionRunner(std::shared_ptr<Session> session, size_t final_poses_in_memory);
+  // probe_bytes: SessionManagerOptions::reader_probe_bytes (MvReaderOptions::probe_bytes).
+  SessionRunner(std::shared_ptr<Session> session, size_t final_poses_in_memory,
+                int64_t probe_bytes = 0);
   // Runs the session to its end (a terminal state).
   void Run();
 

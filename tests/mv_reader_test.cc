@@ -203,6 +203,44 @@ TEST(MvReaderTest, ByteSourceYieldsTheSameFramesAsTheFile) {
   }
 }
 
+// A byte stream read with a small probe (SessionManagerOptions::reader_probe_bytes)
+// gives the same frames, timestamps and stream facts as FFmpeg's default
+// probe; the luma is copied only for frames luma_wanted asks for.
+TEST(MvReaderTest, SmallProbeSameFramesAndLumaOnlyWhenWanted) {
+  const std::string path = MakeTempDir("probe") + "/pan.ts";
+  ASSERT_TRUE(WritePan(path, EncoderOptions{}, 25, kVx, kVy).ok());
+  const std::string bytes = testing::ReadFileBytes(path);
+  MvReaderOptions small;
+  small.format = "mpegts";
+  small.probe_bytes = 32 << 10;
+  small.keep_luma = true;
+  int asked = 0;
+  small.luma_wanted = [&asked] { return ++asked % 2 == 0; };  // every other frame
+  MvReaderOptions full;
+  full.format = "mpegts";
+  auto a = MvReader::Open(std::make_unique<MemoryByteSource>(bytes), full);
+  auto b = MvReader::Open(std::make_unique<MemoryByteSource>(bytes), small);
+  ASSERT_TRUE(a.ok() && b.ok());
+  EXPECT_EQ((*a)->info().fps, (*b)->info().fps);
+  EXPECT_EQ((*a)->info().width_px, (*b)->info().width_px);
+  Status end_a, end_b;
+  const auto fa = ReadAll(a->get(), &end_a);
+  const auto fb = ReadAll(b->get(), &end_b);
+  EXPECT_EQ(end_b.code(), StatusCode::kOutOfRange);
+  ASSERT_EQ(fa.size(), 25u);
+  ASSERT_EQ(fa.size(), fb.size());
+  EXPECT_EQ(asked, 25);
+  for (size_t i = 0; i < fa.size(); ++i) {
+    EXPECT_EQ(fa[i].type, fb[i].type);
+    EXPECT_EQ(fa[i].timestamp_s, fb[i].timestamp_s);
+    ASSERT_EQ(fa[i].mvs.size(), fb[i].mvs.size());
+    EXPECT_TRUE(fa[i].luma.empty());  // keep_luma off
+    const size_t plane =
+        static_cast<size_t>(b->get()->info().width_px) * b->get()->info().height_px;
+    EXPECT_EQ(fb[i].luma.size(), fb[i].index % 2 == 1 ? plane : 0u) << "frame " << fb[i].index;
+  }
+}
+
 TEST(MvReaderTest, IpppStreamHasOnlyPastVectorsOneFrameApart) {
   const std::string path = MakeTempDir("ippp") + "/ippp.ts";
   EncoderOptions eo;

@@ -126,6 +126,18 @@ int RunServe(int argc, char** argv) {
   app.add_option("--event-ring", ring, "events kept per session for resuming watchers")
       ->type_name("N")
       ->capture_default_str();
+  int64_t probe_kb = o.sessions.reader_probe_bytes >> 10;
+  app.add_option("--reader-probe-kb", probe_kb,
+                 "KiB a session's reader may read to identify its stream (FFmpeg's probesize; "
+                 "MPEG-TS byte streams, RTSP push and upload, buffer this much at their start; "
+                 "raise it for a stream whose facts come late; 0: FFmpeg's 5 MB)")
+      ->type_name("KB")
+      ->capture_default_str();
+  app.add_option("--malloc-arena-max", o.malloc_arena_max,
+                 "glibc malloc arenas of the process (fewer keep less freed memory per "
+                 "session thread; 0: glibc's default, 8 per core)")
+      ->type_name("N")
+      ->capture_default_str();
   int64_t create_idle_s = o.sessions.create_idle_timeout_ms / 1000;
   int64_t stall_s = o.sessions.upload_stall_timeout_ms / 1000;
   app.add_option("--create-idle-timeout-s", create_idle_s,
@@ -275,6 +287,7 @@ int RunServe(int argc, char** argv) {
   o.sessions.max_sessions = static_cast<int>(max_sessions);
   o.sessions.max_upload_bytes = max_upload_mb << 20;
   o.sessions.event_ring_capacity = static_cast<size_t>(ring);
+  o.sessions.reader_probe_bytes = probe_kb << 10;
   o.sessions.create_idle_timeout_ms = create_idle_s * 1000;
   o.sessions.upload_stall_timeout_ms = stall_s * 1000;
   o.sessions.retention_ttl_s = retention_ttl_s;

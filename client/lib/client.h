@@ -85,6 +85,10 @@ class SlapseClient {
   // Sends `bytes` / the file at `path` in chunks as the session's stream.
   StatusOr<v1::Session> UploadBytes(const std::string& name, const std::string& bytes);
   StatusOr<v1::Session> UploadFile(const std::string& name, const std::string& path);
+  // Streams chunks from `next_chunk` (fills one, returns false after the
+  // last) as the session's stream: bytes as they come, e.g. from a pipe.
+  StatusOr<v1::Session> Upload(const std::string& name,
+                               const std::function<bool(std::string*)>& next_chunk);
 
   // Streams events after `after_sequence` into `on_event` until the session
   // ends (OK), `on_event` returns false (CANCELLED), the deadline passes or
@@ -93,9 +97,6 @@ class SlapseClient {
                const std::function<bool(const v1::SessionEvent&)>& on_event);
 
  private:
-  // Streams chunks from `next_chunk` (fills one, returns false after the last).
-  StatusOr<v1::Session> Upload(const std::string& name,
-                               const std::function<bool(std::string*)>& next_chunk);
   // The deadline (none for timeout_s <= 0), the bearer token and, for a call
   // about `session` whose name carries its replica, the routing header
   // api::kReplicaHeader of an rpc.

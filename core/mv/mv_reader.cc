@@ -151,6 +151,7 @@ StatusOr<std::unique_ptr<MvReader>> MvReader::OpenImpl(std::unique_ptr<MvReader>
   }
   AVDictionary* fmt_opts = nullptr;
   for (const auto& [k, v] : options.format_options) av_dict_set(&fmt_opts, k.c_str(), v.c_str(), 0);
+  if (options.probe_bytes > 0) av_dict_set_int(&fmt_opts, "probesize", options.probe_bytes, 0);
   const std::string open_url = r->avio_ != nullptr ? "" : url;
   int err = avformat_open_input(&r->fmt_, open_url.c_str(), iformat, &fmt_opts);
   av_dict_free(&fmt_opts);
@@ -277,7 +278,7 @@ void MvReader::Collect(AVFrame* f) {
 
   // (Not after a resolution change: the plane would not be the stream's size.)
   if (options_.keep_luma && f->data[0] != nullptr && f->width == base_width_px_ &&
-      f->height == base_height_px_) {
+      f->height == base_height_px_ && (!options_.luma_wanted || options_.luma_wanted())) {
     rec.luma.resize(static_cast<size_t>(f->width) * f->height);
     for (int y = 0; y < f->height; ++y) {
       std::memcpy(rec.luma.data() + static_cast<size_t>(y) * f->width,

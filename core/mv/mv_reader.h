@@ -38,6 +38,15 @@ struct MvReaderOptions {
   int decoder_threads = 1;
   // Also hand out each frame's decoded luma plane (for overlays; costs a copy).
   bool keep_luma = false;
+  // With keep_luma: asked per frame whether its luma is wanted at all (e.g.
+  // the server: only while someone looks at the overlays); unset = always.
+  // A frame not wanted has no luma, and the reader copies nothing.
+  std::function<bool()> luma_wanted;
+  // Bytes FFmpeg may read to identify the input and its streams
+  // (AVFormatContext.probesize). The MPEG-TS demuxer also keeps this much of
+  // a byte stream for seeking back while it probes, so a reader's I/O buffer
+  // grows to it at the start (freed later). 0 = FFmpeg's default, 5 000 000.
+  int64_t probe_bytes = 0;
   // Polled during blocking I/O; returning true aborts it (Next() then returns CANCELLED).
   std::function<bool()> interrupt;
   // A codec whose decoder exports no motion vectors (HEVC, VP9, AV1, MJPEG, ...)
