@@ -72,7 +72,9 @@ void ExpectTracks(const DriveResult& r, double max_ate_frac, double max_eps_D) {
 // that did not track says why, and poses, if any appear, follow the truth.
 void ExpectTracksOrSaysWhy(const DriveResult& r) {
   EXPECT_GT(r.anchor_pairs, 15);
-  if (r.tracked_pairs < r.anchor_pairs) EXPECT_FALSE(r.note.empty());
+  if (r.tracked_pairs < r.anchor_pairs) {
+    EXPECT_FALSE(r.note.empty());
+  }
   if (r.posed_frames == 0) {
     EXPECT_EQ(r.first_pose_frame, -1);
     EXPECT_EQ(r.tracked_pairs, 0);

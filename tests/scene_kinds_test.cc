@@ -180,13 +180,17 @@ TEST(SceneKindsTest, KindsHaveTheirParts) {
   }
   // Avenue: facades further than 13 m, many trees; urban: facades within 13 m.
   for (const GtPlane& p : avenue.planes) {
-    if (p.kind == PlaneKind::kFacade) EXPECT_GT(MinLateral(avenue, p), 13.0);
+    if (p.kind == PlaneKind::kFacade) {
+      EXPECT_GT(MinLateral(avenue, p), 13.0);
+    }
   }
   EXPECT_GT(clutter(avenue), 2 * clutter(urban));
   // Plaza: parked cars (object planes), facades 30 m away or more.
   EXPECT_GT(CountKind(plaza, PlaneKind::kObject), 50);
   for (const GtPlane& p : plaza.planes) {
-    if (p.kind == PlaneKind::kFacade) EXPECT_GT(MinLateral(plaza, p), 30.0);
+    if (p.kind == PlaneKind::kFacade) {
+      EXPECT_GT(MinLateral(plaza, p), 30.0);
+    }
   }
   // Intersection: the centreline turns by 90 degrees at each bend.
   int corners = 0;
