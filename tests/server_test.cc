@@ -23,7 +23,9 @@
 #include <grpcpp/security/credentials.h>
 #include <grpcpp/support/byte_buffer.h>
 
+#include "api/convert.h"
 #include "client/lib/client.h"
+#include "core/pipeline/result_io.h"
 #include "lab/sim/simulate.h"
 #include "server/server.h"
 #include "server/upload_queue.h"
@@ -568,6 +570,39 @@ TEST_F(ServerTest, PagedTrajectoryEqualsTheWholeOne) {
   ASSERT_TRUE(part.ok()) << part.status().ToString();
   ASSERT_EQ(part->points_size(), 5);
   EXPECT_EQ(part->points(0).SerializeAsString(), all->points(3).SerializeAsString());
+  // The client library in pages of 7: GetTrajectory gives the unpaged answer
+  // (name, last_sequence and all), and ForEachTrajectoryPage's pages written
+  // one at a time (what `slapse export` does) give the unpaged file's bytes.
+  ClientOptions small_pages = TestClientOptions();
+  small_pages.page_size = 7;
+  auto pager = SlapseClient::Connect("127.0.0.1:" + std::to_string(server_->port()), small_pages);
+  auto gathered = pager->GetTrajectory(created->name());
+  ASSERT_TRUE(gathered.ok()) << gathered.status().ToString();
+  EXPECT_EQ(gathered->SerializeAsString(), all->SerializeAsString());
+  std::ostringstream streamed;
+  WriteTrajectoryTumHeader(streamed);
+  int calls = 0;
+  ASSERT_TRUE(pager
+                  ->ForEachTrajectoryPage(created->name(),
+                                          [&](const v1::Trajectory& page) {
+                                            EXPECT_LE(page.points_size(), 7);
+                                            WriteTrajectoryTumRows(api::TrajectoryFromProto(page),
+                                                                   streamed);
+                                            return ++calls < 1000;
+                                          })
+                  .ok());
+  EXPECT_EQ(calls, (all->points_size() + 6) / 7);
+  std::ostringstream whole_file;
+  WriteTrajectoryTum(api::TrajectoryFromProto(*all), whole_file);
+  EXPECT_EQ(streamed.str(), whole_file.str());
+  // A caller that stops early gets CANCELLED after its page.
+  calls = 0;
+  EXPECT_EQ(pager
+                ->ForEachTrajectoryPage(created->name(),
+                                        [&](const v1::Trajectory&) { return ++calls < 2; })
+                .code(),
+            StatusCode::kCancelled);
+  EXPECT_EQ(calls, 2);
   // Bad paging is a precise error.
   v1::GetTrajectoryRequest bad = whole;
   bad.set_page_token("garbage");

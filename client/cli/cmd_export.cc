@@ -22,6 +22,43 @@ const char* DefaultFileName(const std::string& format) {
   return "session.json";
 }
 
+// tum, kitti or quality, written page by page as the pages arrive: the
+// export of a week-long session holds one page, not the week.
+Status WriteTrajectoryPages(client::SlapseClient& client, const std::string& name,
+                            const std::string& format, std::ostream& os, int64_t* poses) {
+  if (format == "tum") WriteTrajectoryTumHeader(os);
+  if (format == "quality") WritePoseQualityCsvHeader(os);
+  return client.ForEachTrajectoryPage(name, [&](const v1::Trajectory& page) {
+    if (format == "quality") {
+      WritePoseQualityCsvRows(api::FramePosesFromProto(page), os);
+    } else if (format == "tum") {
+      WriteTrajectoryTumRows(api::TrajectoryFromProto(page), os);  // as Pipeline::poses()
+    } else {
+      WriteTrajectoryKitti(api::TrajectoryFromProto(page), os);
+    }
+    *poses += page.points_size();
+    return static_cast<bool>(os);
+  });
+}
+
+// json: one document (trajectory + plane map, run's planes.json schema), so
+// it is built whole.
+Status WriteJson(client::SlapseClient& client, const std::string& name, std::ostream& os,
+                 int64_t* poses, int* planes) {
+  auto trajectory = client.GetTrajectory(name);
+  if (!trajectory.ok()) return trajectory.status();
+  auto plane_map = client.GetPlaneMap(name);
+  if (!plane_map.ok()) return plane_map.status();
+  const auto traj = api::TrajectoryFromProto(*trajectory);
+  ResultJsonOptions o;
+  o.seen_at_frames = false;  // a server's plane map does not keep them
+  o.trajectory = &traj;
+  WriteResultJson(api::PlaneMapFromProto(*plane_map), trajectory->metric(), o, os);
+  *poses = trajectory->points_size();
+  *planes = plane_map->planes_size();
+  return Status();
+}
+
 }  // namespace
 
 int RunExport(int argc, char** argv) {
@@ -62,44 +99,44 @@ int RunExport(int argc, char** argv) {
   auto client = client::SlapseClient::Connect(server, *connection);
   auto session = client->GetSession(name);
   if (!session.ok()) return Fail("export", session.status().ToString());
-  auto trajectory = client->GetTrajectory(name);
-  if (!trajectory.ok()) return Fail("export", trajectory.status().ToString());
-  v1::PlaneMap plane_map;
-  if (format == "json") {
-    auto got = client->GetPlaneMap(name);
-    if (!got.ok()) return Fail("export", got.status().ToString());
-    plane_map = std::move(*got);
-  }
 
-  const auto traj = api::TrajectoryFromProto(*trajectory);  // as Pipeline::poses()
+  Status fetched;  // the first failed rpc while writing, if any
+  int64_t poses = 0;
+  int planes = -1;
   auto write = [&](std::ostream& os) {
-    if (format == "tum") {
-      WriteTrajectoryTum(traj, os);
-    } else if (format == "kitti") {
-      WriteTrajectoryKitti(traj, os);
-    } else if (format == "quality") {
-      WritePoseQualityCsv(api::FramePosesFromProto(*trajectory), os);
+    if (format == "json") {
+      fetched = WriteJson(*client, name, os, &poses, &planes);
     } else {
-      ResultJsonOptions o;
-      o.seen_at_frames = false;  // a server's plane map does not keep them
-      o.trajectory = &traj;
-      WriteResultJson(api::PlaneMapFromProto(plane_map), trajectory->metric(), o, os);
+      fetched = WriteTrajectoryPages(*client, name, format, os, &poses);
     }
   };
   if (out == "-") {
     write(std::cout);
     std::cout.flush();
+    if (!fetched.ok()) return Fail("export", fetched.ToString());
     if (!std::cout) return Fail("export", "cannot write to stdout");
     return 0;
   }
-  if (Status s = WriteResultFile(out, write); !s.ok()) return Fail("export", s.message());
+  // Pages are written as they come into OUT.partial, renamed to OUT once the
+  // last one is in: a failed export leaves no half file and an older OUT as it was.
+  const std::string partial = out + ".partial";
+  Status written = WriteResultFile(partial, write);
+  if (written.ok() && fetched.ok()) {
+    std::filesystem::rename(partial, out, ec);
+    if (ec)
+      written = UnavailableError("cannot rename " + partial + " to " + out + ": " + ec.message());
+  }
+  if (!written.ok() || !fetched.ok()) {
+    std::filesystem::remove(partial, ec);
+    if (!written.ok()) return Fail("export", written.message());
+    return Fail("export", fetched.ToString() + " (" + out + " not written)");
+  }
   const bool active =
       session->state() == v1::Session::CREATED || session->state() == v1::Session::RUNNING;
-  std::printf(
-      "wrote %s: %d poses%s of %s (%s%s)\n", out.c_str(), trajectory->points_size(),
-      format == "json" ? (", " + std::to_string(plane_map.planes_size()) + " planes").c_str() : "",
-      name.c_str(), v1::Session::State_Name(session->state()).c_str(),
-      active ? ": a snapshot so far" : "");
+  std::printf("wrote %s: %lld poses%s of %s (%s%s)\n", out.c_str(), static_cast<long long>(poses),
+              planes >= 0 ? (", " + std::to_string(planes) + " planes").c_str() : "", name.c_str(),
+              v1::Session::State_Name(session->state()).c_str(),
+              active ? ": a snapshot so far" : "");
   return 0;
 }
 

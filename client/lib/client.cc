@@ -160,22 +160,35 @@ StatusOr<v1::PlaneMap> SlapseClient::GetPlaneMapPage(const v1::GetPlaneMapReques
 }
 
 StatusOr<v1::Trajectory> SlapseClient::GetTrajectory(const std::string& name) {
+  v1::Trajectory out;
+  bool first = true;
+  Status s = ForEachTrajectoryPage(name, [&](const v1::Trajectory& page) {
+    if (first) {
+      out = page;  // its name and last_sequence: every later page is at least as new
+      first = false;
+    } else {
+      for (const auto& p : page.points()) *out.add_points() = p;
+      out.set_metric(page.metric());
+    }
+    return true;
+  });
+  if (!s.ok()) return s;
+  out.clear_next_page_token();
+  return out;
+}
+
+Status SlapseClient::ForEachTrajectoryPage(
+    const std::string& name, const std::function<bool(const v1::Trajectory&)>& on_page) {
   v1::GetTrajectoryRequest request;
   request.set_name(name);
   request.set_page_size(options_.page_size);
-  auto first = GetTrajectoryPage(request);
-  if (!first.ok()) return first;
-  v1::Trajectory out = std::move(*first);
-  // The first page's last_sequence: every later page is at least as new.
-  while (!out.next_page_token().empty()) {
-    request.set_page_token(out.next_page_token());
+  while (true) {
     auto page = GetTrajectoryPage(request);
     if (!page.ok()) return page.status();
-    for (auto& p : *page->mutable_points()) *out.add_points() = std::move(p);
-    out.set_metric(page->metric());
-    out.set_next_page_token(page->next_page_token());
+    if (!on_page(*page)) return Status(StatusCode::kCancelled, "stopped by the caller");
+    if (page->next_page_token().empty()) return Status();
+    request.set_page_token(page->next_page_token());
   }
-  return out;
 }
 
 StatusOr<v1::PlaneMap> SlapseClient::GetPlaneMap(const std::string& name) {

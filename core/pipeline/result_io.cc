@@ -8,8 +8,16 @@
 namespace slapse {
 
 void WriteTrajectoryTum(const std::vector<TimedPose>& trajectory, std::ostream& out) {
+  WriteTrajectoryTumHeader(out);
+  WriteTrajectoryTumRows(trajectory, out);
+}
+
+void WriteTrajectoryTumHeader(std::ostream& out) {
   out << "# timestamp_s tx ty tz qx qy qz qw  (world_from_cam; world = first tracked camera, "
          "x right, y down, z forward)\n";
+}
+
+void WriteTrajectoryTumRows(const std::vector<TimedPose>& trajectory, std::ostream& out) {
   char line[400];
   for (const auto& p : trajectory) {
     const Eigen::Quaterniond& q = p.world_from_cam.rotation;
@@ -41,7 +49,15 @@ std::vector<TimedPose> TimedPosesOf(const std::vector<FramePose>& poses) {
 }
 
 void WritePoseQualityCsv(const std::vector<FramePose>& poses, std::ostream& out) {
+  WritePoseQualityCsvHeader(out);
+  WritePoseQualityCsvRows(poses, out);
+}
+
+void WritePoseQualityCsvHeader(std::ostream& out) {
   out << "frame_index,timestamp_s,kind,position_sigma,inliers,rms_px,revision,gap_frames,note\n";
+}
+
+void WritePoseQualityCsvRows(const std::vector<FramePose>& poses, std::ostream& out) {
   char line[200];
   for (const FramePose& p : poses) {
     const PoseQuality& q = p.quality;

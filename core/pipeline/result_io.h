@@ -16,6 +16,10 @@ namespace slapse {
 
 // TUM: a header comment, then "timestamp_s tx ty tz qx qy qz qw" per pose.
 void WriteTrajectoryTum(const std::vector<TimedPose>& trajectory, std::ostream& out);
+// The same file in parts, for a writer that gets its poses in pages:
+// the header once, then the rows of each page (the bytes are equal).
+void WriteTrajectoryTumHeader(std::ostream& out);
+void WriteTrajectoryTumRows(const std::vector<TimedPose>& trajectory, std::ostream& out);
 
 // KITTI: the 3x4 matrix [R | t] of each pose, row-major, one pose per line.
 void WriteTrajectoryKitti(const std::vector<TimedPose>& trajectory, std::ostream& out);
@@ -30,6 +34,9 @@ std::vector<TimedPose> TimedPosesOf(const std::vector<FramePose>& poses);
 // kind: ANCHOR | FRAME | INTERPOLATED | COASTING; position_sigma in the
 // trajectory's unit ("nan": none, see PoseQuality); note quoted.
 void WritePoseQualityCsv(const std::vector<FramePose>& poses, std::ostream& out);
+// In parts, as WriteTrajectoryTumHeader / Rows.
+void WritePoseQualityCsvHeader(std::ostream& out);
+void WritePoseQualityCsvRows(const std::vector<FramePose>& poses, std::ostream& out);
 
 struct ResultJsonOptions {
   // Each plane's "seen_at_frames" (MapPlane::seen_indices); a server's plane
