@@ -5,7 +5,9 @@
 //
 // Prints a Markdown table: frames/s of bare FFmpeg decoding (no MV export),
 // of the MV reader (decode + export_mvs + conversion), and of the whole SLAPSE
-// pipeline (reader + merging + thresholding + plane fitting + EKF), each run in
+// pipeline (reader + merging + thresholding + plane fitting + EKF), the last
+// two as shipped (MvReaderOptions::reduced_decode) and decoding every picture
+// in full, each run in
 // a fresh process of its own so that its peak memory is its own; then the
 // pipeline's per-anchor-pair stage times. Timing lives here, never in tests.
 #include <sys/resource.h>
@@ -77,8 +79,14 @@ long BareDecode(const std::string& path) {
   return frames;
 }
 
-long ReadMvs(const std::string& path) {
-  auto reader = slapse::MvReader::Open(path);
+slapse::MvReaderOptions ReaderOptions(bool reduced_decode) {
+  slapse::MvReaderOptions o;
+  o.reduced_decode = reduced_decode;
+  return o;
+}
+
+long ReadMvs(const std::string& path, bool reduced_decode) {
+  auto reader = slapse::MvReader::Open(path, ReaderOptions(reduced_decode));
   if (!reader.ok()) return -1;
   slapse::FrameRecord f;
   long frames = 0;
@@ -86,8 +94,9 @@ long ReadMvs(const std::string& path) {
   return frames;
 }
 
-long RunPipeline(const std::string& path, const slapse::Intrinsics& intrinsics, Result* r) {
-  auto reader = slapse::MvReader::Open(path);
+long RunPipeline(const std::string& path, const slapse::Intrinsics& intrinsics, bool reduced_decode,
+                 Result* r) {
+  auto reader = slapse::MvReader::Open(path, ReaderOptions(reduced_decode));
   if (!reader.ok()) return -1;
   slapse::Pipeline pipeline(intrinsics, (*reader)->info().mv_sigma_px());
   slapse::FrameRecord f;
@@ -116,9 +125,12 @@ Result MeasureHere(int mode, const std::string& path, const slapse::Intrinsics& 
   for (int i = 0; i < repeat; ++i) {
     Result r;
     const auto t0 = Clock::now();
-    r.frames = mode == 0   ? BareDecode(path)
-               : mode == 1 ? ReadMvs(path)
-                           : RunPipeline(path, intrinsics, &r);
+    // Modes: 0 bare decode; 1 / 2 reader / pipeline as shipped (reduced
+    // decode); 3 / 4 the same decoding every picture in full.
+    const bool reduced = mode < 3;
+    r.frames = mode == 0                  ? BareDecode(path)
+               : (mode == 1 || mode == 3) ? ReadMvs(path, reduced)
+                                          : RunPipeline(path, intrinsics, reduced, &r);
     r.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
     if (r.seconds < best.seconds) best = r;
   }
@@ -219,13 +231,16 @@ int main(int argc, char** argv) {
     intrinsics = slapse::Intrinsics::FromHorizontalFov((*reader)->info().width_px,
                                                        (*reader)->info().height_px, 70);
   }
-  const char* names[] = {"bare FFmpeg decode (no MV export)", "MV reader (decode + export_mvs)",
-                         "SLAPSE pipeline (reader + all stages)"};
-  Result results[3];
+  const char* names[] = {"bare FFmpeg decode (no MV export)",
+                         "MV reader (reduced decode + export_mvs)",
+                         "SLAPSE pipeline (reader + all stages)",
+                         "MV reader, every picture in full (reduced_decode off)",
+                         "SLAPSE pipeline, every picture in full"};
+  Result results[5];
   std::printf("input: %s, best of %d runs, 1 decoder thread\n\n", input.c_str(), repeat);
   std::printf("| stage | frames | seconds | frames/s | x bare decode | peak RSS (MiB) |\n");
   std::printf("|---|---:|---:|---:|---:|---:|\n");
-  for (int mode = 0; mode < 3; ++mode) {
+  for (int mode = 0; mode < 5; ++mode) {
     results[mode] = Measure(mode, input, intrinsics, repeat);
     const Result& r = results[mode];
     std::printf("| %s | %ld | %.3f | %.0f | %.2f | %.1f |\n", names[mode], r.frames, r.seconds,

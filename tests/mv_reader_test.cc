@@ -241,6 +241,64 @@ TEST(MvReaderTest, SmallProbeSameFramesAndLumaOnlyWhenWanted) {
   }
 }
 
+// reduced_decode (H.264 without its deblocking filter; a no-op for the
+// others) changes the decoded pictures only: on a simulated drive (textured
+// street, intra and skipped blocks) every frame's type, timing, references
+// and every vector field are those of the full decode.
+class ReducedDecodeTest : public ::testing::TestWithParam<VideoCodec> {};
+
+TEST_P(ReducedDecodeTest, GivesTheFullDecodesFramesAndVectors) {
+  SimulateOptions sim = testing::SmallMpeg2DriveOptions(5, 2.0);
+  sim.encoder.codec = GetParam();
+  auto drive = testing::SimulateTestDrive("reduced", sim);
+  ASSERT_TRUE(drive.ok()) << drive.status().ToString();
+  MvReaderOptions full;
+  full.reduced_decode = false;
+  MvReaderOptions reduced;
+  reduced.reduced_decode = true;
+  auto a = MvReader::Open(drive->video_path, full);
+  auto b = MvReader::Open(drive->video_path, reduced);
+  ASSERT_TRUE(a.ok() && b.ok());
+  Status end_a, end_b;
+  const auto fa = ReadAll(a->get(), &end_a);
+  const auto fb = ReadAll(b->get(), &end_b);
+  EXPECT_EQ(end_a.code(), StatusCode::kOutOfRange);
+  EXPECT_EQ(end_b.code(), StatusCode::kOutOfRange);
+  EXPECT_EQ((*b)->info().width_px, 320);
+  EXPECT_EQ((*b)->info().height_px, 240);
+  EXPECT_EQ((*a)->info().mv_precision_denom, (*b)->info().mv_precision_denom);
+  EXPECT_TRUE((*b)->stats().notes.empty()) << (*b)->stats().notes.front();
+  ASSERT_EQ(fa.size(), 60u);
+  ASSERT_EQ(fa.size(), fb.size());
+  size_t vectors = 0;
+  for (size_t i = 0; i < fa.size(); ++i) {
+    SCOPED_TRACE("frame " + std::to_string(i));
+    EXPECT_EQ(fa[i].index, fb[i].index);
+    EXPECT_EQ(fa[i].type, fb[i].type);
+    EXPECT_EQ(fa[i].timestamp_s, fb[i].timestamp_s);
+    EXPECT_EQ(fa[i].coded_index, fb[i].coded_index);
+    EXPECT_EQ(fa[i].prev_anchor_index, fb[i].prev_anchor_index);
+    EXPECT_EQ(fa[i].next_anchor_index, fb[i].next_anchor_index);
+    EXPECT_EQ(fa[i].reference_certain, fb[i].reference_certain);
+    EXPECT_FALSE(fb[i].corrupt);
+    ASSERT_EQ(fa[i].mvs.size(), fb[i].mvs.size());
+    for (size_t k = 0; k < fa[i].mvs.size(); ++k) {
+      const MotionVector &u = fa[i].mvs[k], &v = fb[i].mvs[k];
+      ASSERT_TRUE(u.x_px == v.x_px && u.y_px == v.y_px && u.dx_px == v.dx_px &&
+                  u.dy_px == v.dy_px && u.w_px == v.w_px && u.h_px == v.h_px &&
+                  u.direction == v.direction)
+          << "vector " << k;
+    }
+    vectors += fa[i].mvs.size();
+  }
+  EXPECT_GT(vectors, 1000u);  // not vacuous: a drive's worth of vectors
+}
+
+INSTANTIATE_TEST_SUITE_P(Codecs, ReducedDecodeTest,
+                         ::testing::Values(VideoCodec::kMpeg2, VideoCodec::kMpeg4,
+                                           VideoCodec::kH264),
+                         [](const auto& info) { return std::string(VideoCodecName(info.param)); });
+
 TEST(MvReaderTest, IpppStreamHasOnlyPastVectorsOneFrameApart) {
   const std::string path = MakeTempDir("ippp") + "/ippp.ts";
   EncoderOptions eo;

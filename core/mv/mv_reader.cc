@@ -189,6 +189,7 @@ StatusOr<std::unique_ptr<MvReader>> MvReader::OpenImpl(std::unique_ptr<MvReader>
   r->dec_->thread_count = std::max(1, options.decoder_threads);
   AVDictionary* dec_opts = nullptr;
   if (!reencode) av_dict_set(&dec_opts, "flags2", "+export_mvs", 0);
+  if (!reencode && options.reduced_decode) r->dec_->skip_loop_filter = AVDISCARD_ALL;
   err = avcodec_open2(r->dec_, codec, &dec_opts);
   av_dict_free(&dec_opts);
   if (err < 0) {

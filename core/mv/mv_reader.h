@@ -62,6 +62,14 @@ struct MvReaderOptions {
   // every stream (a server that ended its stream) and when the server's TCP
   // connection closes (a killed camera); only the first still answers.
   bool check_source_at_end = false;
+  // Decode only as much of each picture as the vectors and the frame's
+  // error flags need. The vectors are parsed from the bitstream, so they come
+  // out identical (mv_reader_test); only the pictures (the luma) differ.
+  // Today: H.264 skips its in-loop deblocking filter (skip_loop_filter; the
+  // luma is blockier). Not lowres for MPEG-1/2 / MPEG-4 Part 2, which would
+  // cut more: FFmpeg's error resilience is off at lowres, so damaged frames
+  // would no longer be flagged corrupt. Savings: docs/BENCHMARKS.md.
+  bool reduced_decode = true;
 };
 
 // True if FFmpeg's decoder for this codec exports motion vectors.
