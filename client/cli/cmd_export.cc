@@ -113,8 +113,8 @@ int RunExport(int argc, char** argv) {
   if (out == "-") {
     write(std::cout);
     std::cout.flush();
+    if (!std::cout) return Fail("export", "cannot write to stdout");  // (pages stop: CANCELLED)
     if (!fetched.ok()) return Fail("export", fetched.ToString());
-    if (!std::cout) return Fail("export", "cannot write to stdout");
     return 0;
   }
   // Pages are written as they come into OUT.partial, renamed to OUT once the
