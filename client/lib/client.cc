@@ -162,12 +162,12 @@ StatusOr<v1::PlaneMap> SlapseClient::GetPlaneMapPage(const v1::GetPlaneMapReques
 StatusOr<v1::Trajectory> SlapseClient::GetTrajectory(const std::string& name) {
   v1::Trajectory out;
   bool first = true;
-  Status s = ForEachTrajectoryPage(name, [&](const v1::Trajectory& page) {
+  Status s = ForEachTrajectoryPage(name, [&](v1::Trajectory& page) {
     if (first) {
-      out = page;  // its name and last_sequence: every later page is at least as new
+      out = std::move(page);  // its name and last_sequence: every later page is at least as new
       first = false;
     } else {
-      for (const auto& p : page.points()) *out.add_points() = p;
+      for (auto& p : *page.mutable_points()) *out.add_points() = std::move(p);
       out.set_metric(page.metric());
     }
     return true;
@@ -177,17 +177,18 @@ StatusOr<v1::Trajectory> SlapseClient::GetTrajectory(const std::string& name) {
   return out;
 }
 
-Status SlapseClient::ForEachTrajectoryPage(
-    const std::string& name, const std::function<bool(const v1::Trajectory&)>& on_page) {
+Status SlapseClient::ForEachTrajectoryPage(const std::string& name,
+                                           const std::function<bool(v1::Trajectory&)>& on_page) {
   v1::GetTrajectoryRequest request;
   request.set_name(name);
   request.set_page_size(options_.page_size);
   while (true) {
     auto page = GetTrajectoryPage(request);
     if (!page.ok()) return page.status();
+    std::string next = page->next_page_token();  // before on_page, which may move the page
     if (!on_page(*page)) return Status(StatusCode::kCancelled, "stopped by the caller");
-    if (page->next_page_token().empty()) return Status();
-    request.set_page_token(page->next_page_token());
+    if (next.empty()) return Status();
+    request.set_page_token(std::move(next));
   }
 }
 

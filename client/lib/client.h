@@ -80,9 +80,10 @@ class SlapseClient {
   // The same pages handed to `on_page` one at a time as they arrive, so a
   // caller that writes them out holds one page (options.page_size points),
   // not the session. Stops at the last page (OK), at the first failed rpc
-  // (its status) or when `on_page` returns false (CANCELLED).
+  // (its status) or when `on_page` returns false (CANCELLED). The page is
+  // `on_page`'s to keep: it may move from it.
   Status ForEachTrajectoryPage(const std::string& name,
-                               const std::function<bool(const v1::Trajectory&)>& on_page);
+                               const std::function<bool(v1::Trajectory&)>& on_page);
   StatusOr<v1::PlaneMap> GetPlaneMap(const std::string& name);
   // One page (page_size, page_token, time range as the request says).
   StatusOr<v1::Trajectory> GetTrajectoryPage(const v1::GetTrajectoryRequest& request);
