@@ -113,6 +113,26 @@ TEST(EkfJacobians, RoadHeightChangeMatchesFiniteDifferences) {
   EXPECT_LT((n_pi - d_pi).norm(), 1e-8) << n_pi << "\n\n" << d_pi;
 }
 
+TEST(EkfJacobians, MotionErrorMatchesFiniteDifferences) {
+  Fixture fx;
+  // A measurement near the state (as the update sees it) and one far from it.
+  for (const Rigid3d& measured :
+       {Rigid3d(ExpSO3(Eigen::Vector3d(0.021, -0.048, 0.012)), Eigen::Vector3d(0.3, -0.1, 2.5)),
+        Rigid3d(ExpSO3(Eigen::Vector3d(-0.3, 0.2, 0.1)), Eigen::Vector3d(-1, 0.5, 0.2))}) {
+    Eigen::Matrix<double, 5, 6> J;
+    PlaneEkf::MotionError(fx.R, fx.t, measured, &J);
+    auto f = [&](const Eigen::VectorXd& d) {
+      return Eigen::VectorXd(PlaneEkf::MotionError(fx.R * ExpSO3(d.head<3>()),
+                                                   fx.t + d.tail<3>(), measured, nullptr));
+    };
+    const Eigen::MatrixXd n = NumericJacobian(f, [](const Eigen::VectorXd& d) { return d; }, 6);
+    EXPECT_LT((n - J).norm(), 1e-7) << n << "\n\n" << J;
+  }
+  // Zero at the measurement itself, whatever the step's length.
+  const Rigid3d at(fx.R, 3.0 * fx.t);
+  EXPECT_LT(PlaneEkf::MotionError(fx.R, fx.t, at, nullptr).norm(), 1e-12);
+}
+
 TEST(EkfJacobians, PredictionMatchesFiniteDifferencesOfTheErrorState) {
   Fixture fx;
   EkfState x;
@@ -442,6 +462,78 @@ TEST(PlaneEkfTest, RescaleMultipliesLengths) {
   EXPECT_NEAR(1.0 / ekf.planes()[0].pi.norm(), 2.5 * depth, 1e-9);
   EXPECT_LT((ekf.prev_from_cur().translation - 2.5 * t).norm(), 1e-12);
   EXPECT_EQ(Eigen::LLT<Eigen::MatrixXd>(ekf.covariance()).info(), Eigen::Success);
+}
+
+// Without planes the filter only predicts: a constant turn rate cannot follow
+// a car that starts to turn. The pairs' epipolar motion (noisy rotation and
+// direction, its length ignored) keeps the step rotation on the truth while
+// the step length stays the motion model's.
+TEST(PlaneEkfTest, MotionMeasurementsFollowATurnWithoutPlanes) {
+  const Intrinsics K = Intrinsics::FromHorizontalFov(640, 480, 70);
+  std::vector<Rigid3d> poses;  // straight for 5 steps, then a 3 deg per step turn
+  Eigen::Vector3d pos = Eigen::Vector3d::Zero();
+  double yaw = 0;
+  for (int k = 0; k <= 20; ++k) {
+    poses.emplace_back(ExpSO3(Eigen::Vector3d(0, yaw, 0)), pos);
+    if (k >= 5) yaw -= DegToRad(3.0);
+    pos += ExpSO3(Eigen::Vector3d(0, yaw, 0)) * Eigen::Vector3d(0, 0, 1.0);
+  }
+  std::mt19937_64 rng(11);
+  std::normal_distribution<double> rot_noise(0, DegToRad(0.2)), dir_noise(0, DegToRad(1.5));
+  const double dt = 0.1;
+  PlaneEkf with(K), without(K);
+  const Rigid3d first = poses[0].Inverse() * poses[1];
+  ASSERT_TRUE(with.Initialize(first, dt).ok());
+  ASSERT_TRUE(without.Initialize(first, dt).ok());
+  double worst_with_deg = 0, worst_without_deg = 0;
+  for (size_t k = 2; k < poses.size(); ++k) {
+    const Rigid3d truth = poses[k - 1].Inverse() * poses[k];
+    Rigid3d measured(truth.R() * ExpSO3(Eigen::Vector3d(rot_noise(rng), rot_noise(rng),
+                                                        rot_noise(rng))),
+                     5.0 * (ExpSO3(Eigen::Vector3d(dir_noise(rng), dir_noise(rng), 0)) *
+                            truth.translation));  // length: not observed
+    ASSERT_TRUE(with.Predict(dt).ok());
+    ASSERT_TRUE(without.Predict(dt).ok());
+    UpdateReport rep;
+    ASSERT_TRUE(with.UpdateMotion(measured, &rep).ok());
+    EXPECT_TRUE(rep.motion_updated) << "step " << k << " chi2 " << rep.motion_chi2;
+    auto rot_err_deg = [&](const PlaneEkf& f) {
+      return RadToDeg(LogSO3(truth.R().transpose() * f.prev_from_cur().R()).norm());
+    };
+    worst_with_deg = std::max(worst_with_deg, rot_err_deg(with));
+    worst_without_deg = std::max(worst_without_deg, rot_err_deg(without));
+    EXPECT_NEAR(with.prev_from_cur().translation.norm(), 1.0, 0.05) << "step " << k;
+    EXPECT_EQ(Eigen::LLT<Eigen::MatrixXd>(with.covariance()).info(), Eigen::Success);
+    EXPECT_LT((with.covariance() - with.covariance().transpose()).norm(), 1e-12);
+  }
+  EXPECT_LT(worst_with_deg, 1.0);
+  EXPECT_GT(worst_without_deg, 2.5);  // the turn's onset, predicted as straight
+}
+
+TEST(PlaneEkfTest, MotionMeasurementGateAndBadInput) {
+  const Intrinsics K = Intrinsics::FromHorizontalFov(640, 480, 70);
+  const auto poses = DrivePoses(3, 1.0);
+  PlaneEkf ekf(K);
+  UpdateReport rep;
+  const Rigid3d step = poses[0].Inverse() * poses[1];
+  EXPECT_EQ(ekf.UpdateMotion(step, &rep).code(), StatusCode::kFailedPrecondition);
+  ASSERT_TRUE(ekf.Initialize(step, 0.1).ok());
+  ASSERT_TRUE(ekf.Predict(0.1).ok());
+  // A wrong fit (travel 60 deg to the side) is refused and leaves the state.
+  const Rigid3d before = ekf.prev_from_cur();
+  const Rigid3d sideways(step.R(), ExpSO3(Eigen::Vector3d(0, DegToRad(60), 0)) * step.translation);
+  ASSERT_TRUE(ekf.UpdateMotion(sideways, &rep).ok());
+  EXPECT_FALSE(rep.motion_updated);
+  EXPECT_GT(rep.motion_chi2, 20.5);
+  EXPECT_LT((ekf.prev_from_cur().translation - before.translation).norm(), 1e-15);
+  // No translation or not finite: a broken contract.
+  EXPECT_EQ(ekf.UpdateMotion(Rigid3d(step.R(), Eigen::Vector3d::Zero()), &rep).code(),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(ekf.UpdateMotion(Rigid3d(step.R(), Eigen::Vector3d(NAN, 0, 1)), &rep).code(),
+            StatusCode::kInvalidArgument);
+  // The true step is taken.
+  ASSERT_TRUE(ekf.UpdateMotion(poses[1].Inverse() * poses[2], &rep).ok());
+  EXPECT_TRUE(rep.motion_updated);
 }
 
 }  // namespace

@@ -25,6 +25,16 @@ bool InverseSpd(const Eigen::MatrixXd& a, Eigen::MatrixXd* inv) {
   return inv->allFinite();
 }
 
+// An orthonormal basis (3x2) of the plane orthogonal to the unit vector u.
+Eigen::Matrix<double, 3, 2> OrthogonalBasis(const Eigen::Vector3d& u) {
+  const Eigen::Vector3d a =
+      std::abs(u.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+  const Eigen::Vector3d b0 = u.cross(a).normalized();
+  Eigen::Matrix<double, 3, 2> basis;
+  basis << b0, u.cross(b0);
+  return basis;
+}
+
 }  // namespace
 
 PlaneEkf::PlaneEkf(const Intrinsics& intrinsics, EkfOptions options)
@@ -672,6 +682,76 @@ void PlaneEkf::PinScale(const std::vector<TrackedObservation>& tracked,
     rep->scale_correction = std::exp(log_sum / pinned);
     Rescale(rep->scale_correction);
   }
+}
+
+Eigen::Matrix<double, 5, 1> PlaneEkf::MotionError(const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
+                                                  const Rigid3d& measured_prev_from_cur,
+                                                  Eigen::Matrix<double, 5, 6>* J) {
+  const Eigen::Vector3d u_m = measured_prev_from_cur.translation.normalized();
+  const Eigen::Matrix<double, 3, 2> B = OrthogonalBasis(u_m);
+  const Eigen::Vector3d rot = LogSO3(measured_prev_from_cur.R().transpose() * R);
+  const double t_norm = t.norm();
+  const Eigen::Vector3d u = t / t_norm;
+  Eigen::Matrix<double, 5, 1> e;
+  e << rot, B.transpose() * u;
+  if (J != nullptr) {
+    J->setZero();
+    J->block<3, 3>(0, 0) = RightJacobianSO3(rot).inverse();
+    J->block<2, 3>(3, 3) =
+        B.transpose() * (Eigen::Matrix3d::Identity() - u * u.transpose()) / t_norm;
+  }
+  return e;
+}
+
+Status PlaneEkf::UpdateMotion(const Rigid3d& measured_prev_from_cur, UpdateReport* report) {
+  if (!initialized_) return FailedPreconditionError("EKF not initialised");
+  if (!measured_prev_from_cur.translation.allFinite() ||
+      !measured_prev_from_cur.rotation.coeffs().allFinite() ||
+      !(measured_prev_from_cur.translation.norm() > 0)) {
+    return InvalidArgumentError("motion measurement must be finite with a translation");
+  }
+  UpdateReport local;
+  if (report == nullptr) report = &local;
+  report->motion_updated = false;
+  if (!(t_.norm() > 0)) return Status::Ok();  // no direction to compare: nothing observed
+  Eigen::Matrix<double, 5, 6> J;
+  const Eigen::Matrix<double, 5, 1> e = MotionError(R_, t_, measured_prev_from_cur, &J);
+  const int n = static_cast<int>(P_.rows());
+  Eigen::MatrixXd H = Eigen::MatrixXd::Zero(5, n);
+  H.leftCols<6>() = J;  // [dtheta, dt] are the state's first six columns
+  Eigen::Matrix<double, 5, 5> Qm = Eigen::Matrix<double, 5, 5>::Zero();
+  Qm.diagonal() << Eigen::Vector3d::Constant(std::pow(options_.motion_rotation_sigma_rad, 2)),
+      Eigen::Vector2d::Constant(std::pow(options_.motion_direction_sigma_rad, 2));
+  const Eigen::MatrixXd PHt = P_ * H.transpose();
+  const Eigen::MatrixXd S = H * PHt + Eigen::MatrixXd(Qm);
+  Eigen::LLT<Eigen::MatrixXd> llt(S);
+  if (llt.info() != Eigen::Success) {
+    return InternalError("EKF motion innovation covariance is not positive definite");
+  }
+  const Eigen::VectorXd r = -e;
+  report->motion_chi2 = r.dot(llt.solve(r));
+  if (options_.motion_gate_chi2 > 0 && report->motion_chi2 > options_.motion_gate_chi2) {
+    return Status::Ok();
+  }
+  const Eigen::MatrixXd K = llt.solve(PHt.transpose()).transpose();  // P H^T S^-1
+  const Eigen::VectorXd delta = K * r;
+  if (!delta.allFinite()) return InternalError("EKF motion update diverged (non-finite step)");
+  // The measurement has no length: the update turns t (and, through their
+  // correlation, v) but its linear step would lengthen them by a second-order
+  // term each time (|t + dt_perp| > |t|), a slow scale drift. Their lengths
+  // are kept.
+  const double t_norm = t_.norm(), v_norm = v_.norm();
+  R_ = R_ * ExpSO3(delta.segment<3>(kTheta));
+  t_ = (t_ + delta.segment<3>(kT)).normalized() * t_norm;
+  w_ += delta.segment<3>(kW);
+  const Eigen::Vector3d v_new = v_ + delta.segment<3>(kV);
+  if (v_new.norm() > 0) v_ = v_new.normalized() * v_norm;
+  for (size_t i = 0; i < planes_.size(); ++i) planes_[i].pi += delta.segment<3>(PlaneOffset(i));
+  const Eigen::MatrixXd I_KH = Eigen::MatrixXd::Identity(n, n) - K * H;
+  P_ = I_KH * P_ * I_KH.transpose() + K * Eigen::MatrixXd(Qm) * K.transpose();
+  Symmetrize(&P_);
+  report->motion_updated = true;
+  return Status::Ok();
 }
 
 }  // namespace slapse

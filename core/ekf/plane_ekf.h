@@ -107,6 +107,16 @@ struct EkfOptions {
   // the camera height) with this standard deviation; 0 = off. 0.01: 1.5 cm
   // per step at 1.5 m (bumps, suspension).
   double road_height_rel_sigma = 0.01;
+  // Motion measurement (UpdateMotion): the anchor pair's rotation and
+  // direction of travel from its epipolar geometry, used where no plane is
+  // observed. Standard deviations per axis: bench/motion_accuracy measures
+  // 0.06-0.8 deg of rotation and 0.4-6 deg of direction error on the rural
+  // and highway tuning drives (with the rare wrong fit the gate refuses).
+  double motion_rotation_sigma_rad = 0.008;   // ~0.5 deg
+  double motion_direction_sigma_rad = 0.06;   // ~3.4 deg
+  // A measurement whose squared Mahalanobis innovation (5 dof) exceeds this
+  // is refused (99.9 % of a chi-square with 5 dof: 20.5); 0 = no gate.
+  double motion_gate_chi2 = 20.5;
   // (Road-like is the one road test of core/common/road.h with down = the
   // camera's +y axis and road_max_angle_deg.)
 };
@@ -147,6 +157,10 @@ struct UpdateReport {
   int measurements = 0;
   double rms_residual_px = 0.0;  // after the update
   bool skipped = false;          // no tracked plane observed
+  // UpdateMotion: the pair's motion was taken (false: not run, or refused by
+  // the gate), and its squared Mahalanobis innovation.
+  bool motion_updated = false;
+  double motion_chi2 = 0.0;
   // The factor the state's lengths were rescaled by to pin the scale (1: none).
   double scale_correction = 1.0;
 };
@@ -168,6 +182,20 @@ class PlaneEkf {
   // is well determined by the updated motion. A numerically failing update
   // leaves the state as predicted and returns INTERNAL.
   Status Update(const std::vector<PlaneObservation>& observations, UpdateReport* report);
+
+  // Updates the step motion with the anchor pair's epipolar motion where no
+  // plane constrains it: measured_prev_from_cur's rotation and the direction
+  // of its translation (its length is not observed: the step length stays the
+  // motion model's). Residual and Jacobian: MotionResidual. Standard EKF
+  // update over the whole state (H is zero but for dtheta and t):
+  //   S = H P H^T + Q_m,  K = P H^T S^-1 (LLT),  x+ = x (+) K r,
+  //   P+ = (I - K H) P (I - K H)^T + K Q_m K^T (Joseph form, symmetrised),
+  // with Q_m = diag(sigma_rot^2 I3, sigma_dir^2 I2). A measurement with
+  // r^T S^-1 r > motion_gate_chi2 is refused (report->motion_updated false,
+  // state unchanged). FailedPrecondition before Initialize; InvalidArgument
+  // for a non-finite measurement or one without translation; Internal when S
+  // is not positive definite.
+  Status UpdateMotion(const Rigid3d& measured_prev_from_cur, UpdateReport* report);
 
   // The filter plane an observation's track id refers to: the id itself, or
   // the kept road's id when that observation's track was re-identified as it.
@@ -209,6 +237,16 @@ class PlaneEkf {
   // road): c = pi_road^T t, with dc/dt = pi_road^T and dc/dpi_road = t^T.
   static double RoadHeightChange(const Eigen::Vector3d& pi_road, const Eigen::Vector3d& t,
                                  Eigen::RowVector3d* d_t, Eigen::RowVector3d* d_pi);
+
+  // The motion measurement's prediction error for a step (R, t) against a
+  // measured (R_m, u_m = direction of t_m), and (optionally) its Jacobian
+  // w.r.t. [dtheta, dt] (R = R_hat Exp(dtheta), t additive):
+  //   e = [ Log(R_m^T R) ; B^T t / |t| ]   (5; B: an orthonormal 3x2 basis
+  //                                          orthogonal to u_m, so e = 0 at the measurement)
+  //   de_rot/ddtheta = Jr(Log(R_m^T R))^-1,   de_dir/dt = B^T (I - u u^T) / |t|,  u = t / |t|.
+  static Eigen::Matrix<double, 5, 1> MotionError(const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
+                                                 const Rigid3d& measured_prev_from_cur,
+                                                 Eigen::Matrix<double, 5, 6>* J);
 
  private:
   static constexpr int kMotionDim = 12;
