@@ -3,7 +3,12 @@
 // simulated drive's ground truth, for the full robust fit (no prior) and the
 // seeded fast path (the previous pair's motion as prior: the pipeline's front
 // end, core/pipeline/front_end.h, as `slapse run` computes it).
-//   build/bench/motion_accuracy DRIVE_DIR [DRIVE_DIR ...]
+// With --pairs, a line per anchor pair: the full fit's has_motion tests
+// (pair_motion.h) next to what the true motion gives for the same
+// correspondences (true_in: within ransac_threshold_px (Sampson) of the true
+// epipolar geometry; true_par: those of them off the true rotation by >=
+// tau_inf_px), to tell bad MVs from a bad decision.
+//   build/bench/motion_accuracy [--pairs] DRIVE_DIR [DRIVE_DIR ...]
 #include <cmath>
 #include <cstdio>
 #include <optional>
@@ -11,6 +16,8 @@
 #include <vector>
 
 #include "core/common/angles.h"
+#include "core/common/so3.h"
+#include "core/estimators/relative_pose.h"
 #include "core/estimators/pair_motion.h"
 #include "core/mv/mv_reader.h"
 #include "core/pipeline/front_end.h"
@@ -44,12 +51,81 @@ struct Acc {
   }
 };
 
+// The pair's correspondences against the true motion: *in within the
+// threshold of the true epipolar geometry, *par of them with rotation-only
+// parallax >= min_parallax_px under the true rotation.
+void CountAgainstTruth(const slapse::AnchorPair& pair, const slapse::Intrinsics& k,
+                       const slapse::Rigid3d& truth, double threshold_px, double min_parallax_px,
+                       int* in, int* par) {
+  *in = *par = 0;
+  const double f = 0.5 * (k.fx_px + k.fy_px);
+  const Eigen::Matrix3d E = slapse::Skew(truth.translation.normalized()) * truth.R();
+  const Eigen::Matrix3d K = k.K();
+  const Eigen::Matrix3d KRKinv = K * truth.R() * K.inverse();
+  for (const slapse::Correspondence& c : pair.correspondences) {
+    const double d = std::abs(
+        slapse::SampsonDistance(E, k.Unproject(c.x_earlier_px), k.Unproject(c.x_later_px)));
+    if (d * f > threshold_px) continue;
+    ++*in;
+    if (slapse::RotationOnlyParallaxPx(KRKinv, c) >= min_parallax_px) ++*par;
+  }
+}
+
+// The road's (plane 0) correspondences: *n of them, *ok within 1 px of the
+// true transfer, *ok_par of those with true rotation-only parallax >= tau_inf.
+void CountRoad(const slapse::AnchorPair& pair, const slapse::GroundTruth& gt,
+               const slapse::Rigid3d& truth, double min_parallax_px, int* n, int* ok,
+               int* ok_par) {
+  *n = *ok = *ok_par = 0;
+  const Eigen::Matrix3d KRKinv = gt.intrinsics.K() * truth.R() * gt.intrinsics.K().inverse();
+  for (const slapse::Correspondence& c : pair.correspondences) {
+    if (gt.LabelAt(static_cast<int>(pair.later_index), c.x_later_px.x(), c.x_later_px.y()) != 0) {
+      continue;
+    }
+    ++*n;
+    Eigen::Vector2d x;
+    if (!gt.TransferThroughPlane(0, static_cast<int>(pair.later_index),
+                                 static_cast<int>(pair.earlier_index), c.x_later_px, &x)) {
+      continue;
+    }
+    if ((x - c.x_earlier_px).norm() > 1.0) continue;
+    ++*ok;
+    if (slapse::RotationOnlyParallaxPx(KRKinv, c) >= min_parallax_px) ++*ok_par;
+  }
+}
+
+void PrintPair(const slapse::AnchorPair& pair, const slapse::PairMotionReport& r,
+               const slapse::Rigid3d& truth, const slapse::GroundTruth& gt,
+               const slapse::InfinityOptions& o) {
+  const slapse::Intrinsics& k = gt.intrinsics;
+  int true_in = 0, true_par = 0, road = 0, road_ok = 0, road_ok_par = 0;
+  CountAgainstTruth(pair, k, truth, o.ransac_threshold_px, o.tau_inf_px, &true_in, &true_par);
+  CountRoad(pair, gt, truth, o.tau_inf_px, &road, &road_ok, &road_ok_par);
+  const double er = r.has_motion ? AngleDeg(r.later_from_earlier.R(), truth.R()) : -1;
+  const double et = r.has_motion ? slapse::AngleBetweenDeg(r.later_from_earlier.translation,
+                                                           truth.translation)
+                                 : -1;
+  std::printf(
+      "  %lld-%lld n %zu motion %d e_in %d cheir %d rot_out %d par_in %d samp_in %d band %d | "
+      "true_in %d true_par %d road %d ok %d ok_par %d |t| %.2f | err rot %.3f dir %.2f\n",
+      static_cast<long long>(pair.earlier_index), static_cast<long long>(pair.later_index),
+      pair.correspondences.size(), r.has_motion ? 1 : 0, r.num_e_inliers,
+      r.num_cheirality_inliers, r.num_rotation_outliers, r.num_parallax_inliers,
+      r.num_parallax_sampson_inliers, r.num_parallax_control_band, true_in, true_par, road, road_ok, road_ok_par,
+      truth.translation.norm(), er, et);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   Acc all_full, all_seeded;
+  bool pairs = false;
   for (int a = 1; a < argc; ++a) {
     const std::string dir = argv[a];
+    if (dir == "--pairs") {
+      pairs = true;
+      continue;
+    }
     auto gt = slapse::LoadGroundTruth(dir);
     auto reader = slapse::MvReader::Open(dir + "/drive.ts");
     if (!gt.ok() || !reader.ok()) {
@@ -71,6 +147,7 @@ int main(int argc, char** argv) {
                                           options.tau_inf_px);
       const auto& s = step->infinity;
       if (!f.ok() || !s.ok()) continue;
+      if (pairs) PrintPair(pair, *f, truth, *gt, options);
       full.Add(*f, truth);
       seeded.Add(*s, truth);
       all_full.Add(*f, truth);
