@@ -84,6 +84,7 @@ v1::PipelineOptions PipelineOptionsToProto(const PipelineOptions& o) {
   out.set_scale_source(ScaleSourceToProto(o.scale.source));
   out.set_anchors_only(!o.frame_poses.enabled);
   out.set_window_refine(o.window_refine);
+  out.set_motion_only_steps(o.motion_only_steps);
   out.set_refine_window_anchors(o.refine.window_anchors);
   switch (o.scale.source) {
     case ScaleOptions::Source::kFirstStep:
@@ -109,6 +110,7 @@ PipelineOptions PipelineOptionsFromProto(const v1::PipelineOptions& p) {
   o.scale.source = ScaleSourceFromProto(p.scale_source());
   // Unset / 0 = the core struct's defaults.
   if (p.has_window_refine()) o.window_refine = p.window_refine();
+  if (p.has_motion_only_steps()) o.motion_only_steps = p.motion_only_steps();
   if (p.refine_window_anchors() > 0) o.refine.window_anchors = p.refine_window_anchors();
   switch (o.scale.source) {
     case ScaleOptions::Source::kFirstStep:
@@ -197,6 +199,9 @@ PoseQuality PoseQualityFromProto(const v1::PoseQuality& q) {
       break;
     case v1::PoseQuality::COASTING:
       out.kind = PoseKind::kCoasting;
+      break;
+    case v1::PoseQuality::MOTION_ONLY:
+      out.kind = PoseKind::kMotionOnly;
       break;
     default:  // ANCHOR, and a point of a server without per-frame poses
       out.kind = PoseKind::kAnchor;

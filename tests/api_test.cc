@@ -35,6 +35,7 @@ void ExpectSameCarried(const PipelineOptions& a, const PipelineOptions& b) {
   EXPECT_EQ(a.frame_poses.enabled, b.frame_poses.enabled);
   EXPECT_EQ(a.frame_poses.estimator.min_inliers, b.frame_poses.estimator.min_inliers);
   EXPECT_EQ(a.window_refine, b.window_refine);
+  EXPECT_EQ(a.motion_only_steps, b.motion_only_steps);
   EXPECT_EQ(a.refine.window_anchors, b.refine.window_anchors);
 }
 
@@ -76,6 +77,13 @@ TEST(PipelineOptionsRoundTrip, WindowRefine) {
             WindowRefinerOptions{}.window_anchors);
   p.set_refine_window_anchors(2);
   EXPECT_EQ(api::ValidatePipelineOptions(p).code(), StatusCode::kInvalidArgument);
+  // Motion-only steps: set both ways, unset is the struct's default.
+  EXPECT_FALSE(p.has_motion_only_steps());
+  EXPECT_EQ(api::PipelineOptionsFromProto(p).motion_only_steps,
+            PipelineOptions{}.motion_only_steps);
+  PipelineOptions m;
+  m.motion_only_steps = !PipelineOptions{}.motion_only_steps;
+  ExpectRoundTrips(m);
   p.set_refine_window_anchors(31);
   EXPECT_EQ(api::ValidatePipelineOptions(p).code(), StatusCode::kInvalidArgument);
   p.set_refine_window_anchors(8);
@@ -434,7 +442,8 @@ TEST(ValidateTest, ReconnectPolicySdpAndPath) {
 // both ways, every kind (the wire enum shares the core enum's values).
 TEST(FramePoseRoundTrip, EveryKindAndField) {
   for (PoseKind kind :
-       {PoseKind::kAnchor, PoseKind::kFrame, PoseKind::kInterpolated, PoseKind::kCoasting}) {
+       {PoseKind::kAnchor, PoseKind::kFrame, PoseKind::kInterpolated, PoseKind::kCoasting,
+        PoseKind::kMotionOnly}) {
     FramePose p;
     p.pose.index = 42;
     p.pose.timestamp_s = 1.4;

@@ -6,9 +6,9 @@
 // Bounds: what the pipeline achieves today with margin (docs/TRAJECTORY.md
 // "Scene-kind end-to-end tests"), tight enough that a broken pipeline fails:
 // no poses, poses only late, or a trajectory that does not follow the truth.
-// Kinds where today's pipeline does not track are asserted as such only in
-// what is certain (the run completes, no pose is invented before the first
-// tracked pair) and listed as known misses in docs/TRAJECTORY.md.
+// The rural road and the highway have no plane for long stretches at this
+// size: they track through motion-only steps (PipelineOptions::
+// motion_only_steps), and without them they do not initialise at all.
 #include <cstdio>
 #include <filesystem>
 
@@ -20,7 +20,7 @@
 namespace slapse {
 namespace {
 
-DriveResult RunSmallDrive(SceneKind kind, int seed) {
+DriveResult RunSmallDrive(SceneKind kind, int seed, const PipelineOptions& pipeline = {}) {
   DriveSpec spec = MakeDriveSpec(kind, seed);
   spec.name = "e2e-" + spec.name;
   SimulateOptions& o = spec.sim;
@@ -32,6 +32,7 @@ DriveResult RunSmallDrive(SceneKind kind, int seed) {
   o.supersampling = 1;
   o.blur_px = 0.0;
   DriveEvalOptions eo;
+  eo.pipeline = pipeline;
   eo.out_dir = testing::MakeTempDir("scene_kinds_e2e");
   eo.reuse = false;
   auto r = EvaluateDrive(spec, eo);
@@ -51,11 +52,12 @@ DriveResult RunSmallDrive(SceneKind kind, int seed) {
 
 // A kind where today's pipeline tracks: poses from the first second on, for
 // most anchors, following the truth.
-void ExpectTracks(const DriveResult& r, double max_ate_frac, double max_eps_D) {
+void ExpectTracks(const DriveResult& r, double max_ate_frac, double max_eps_D,
+                  int max_untracked_pairs = 3) {
   ASSERT_TRUE(r.evaluated) << r.spec.name << ": fewer than 3 poses";
   EXPECT_GE(r.first_pose_frame, 0);
   EXPECT_LE(r.first_pose_s, 1.0);
-  EXPECT_GE(r.tracked_pairs, r.anchor_pairs - 3);
+  EXPECT_GE(r.tracked_pairs, r.anchor_pairs - max_untracked_pairs);
   EXPECT_GT(r.distance_m, 5.0);
   EXPECT_LT(r.ate_m, max_ate_frac * r.distance_m);
   EXPECT_LT(r.eps_D, max_eps_D);
@@ -66,23 +68,19 @@ void ExpectTracks(const DriveResult& r, double max_ate_frac, double max_eps_D) {
   EXPECT_LT(std::abs(r.scale_error[kScaleFirstStep]), 0.5);
 }
 
-// A kind where today's pipeline does not initialise at this size (rural road
-// and highway at 320x240: no plane extracted / no reliable motion; known
-// misses in docs/TRAJECTORY.md). Nothing fake: the run completes, every pair
-// that did not track says why, and poses, if any appear, follow the truth.
-void ExpectTracksOrSaysWhy(const DriveResult& r) {
-  EXPECT_GT(r.anchor_pairs, 15);
-  if (r.tracked_pairs < r.anchor_pairs) {
-    EXPECT_FALSE(r.note.empty());
-  }
-  if (r.posed_frames == 0) {
-    EXPECT_EQ(r.first_pose_frame, -1);
-    EXPECT_EQ(r.tracked_pairs, 0);
-    return;
-  }
-  if (!r.evaluated) return;
-  EXPECT_LT(r.ate_m, 0.05 * r.distance_m);
-  EXPECT_LT(r.eps_D, 0.10);
+// A kind that has no plane for long stretches: it tracks (as ExpectTracks)
+// through motion-only anchors, and without them (the paper's method) far
+// fewer pairs track, each untracked pair saying why.
+void ExpectTracksWithoutPlanes(SceneKind kind, int max_untracked_pairs) {
+  const DriveResult r = RunSmallDrive(kind, 2);
+  ExpectTracks(r, 0.05, 0.12, max_untracked_pairs);
+  EXPECT_GT(r.motion_only_anchors, 0);
+  PipelineOptions paper;
+  paper.motion_only_steps = false;
+  const DriveResult without = RunSmallDrive(kind, 2, paper);
+  EXPECT_LT(without.tracked_pairs + 3, r.tracked_pairs);
+  EXPECT_FALSE(without.note.empty());
+  EXPECT_EQ(without.motion_only_anchors, 0);
 }
 
 // Today (docs/TRAJECTORY.md): urban ATE 1.1 %, eps_D 5.6 %; avenue 0.4 %, 3.1 %.
@@ -92,11 +90,15 @@ TEST(SceneKindsEndToEndTest, Urban) {
 TEST(SceneKindsEndToEndTest, Avenue) {
   ExpectTracks(RunSmallDrive(SceneKind::kAvenue, 2), 0.05, 0.12);
 }
-TEST(SceneKindsEndToEndTest, RuralKnownMiss) {
-  ExpectTracksOrSaysWhy(RunSmallDrive(SceneKind::kRural, 2));
+// Measured: rural 90 of 90 frames posed from 0 s, ATE 2.6 %, eps_D 5.4 %;
+// highway 78 of 90 from 0.40 s (its first 3 pairs have no reliable motion:
+// 4 untracked pairs allowed, all within the first second), ATE 0.45 %,
+// eps_D 5.0 %. Without motion-only steps neither initialised.
+TEST(SceneKindsEndToEndTest, RuralWithoutPlanes) {
+  ExpectTracksWithoutPlanes(SceneKind::kRural, 3);
 }
-TEST(SceneKindsEndToEndTest, HighwayKnownMiss) {
-  ExpectTracksOrSaysWhy(RunSmallDrive(SceneKind::kHighway, 2));
+TEST(SceneKindsEndToEndTest, HighwayWithoutPlanes) {
+  ExpectTracksWithoutPlanes(SceneKind::kHighway, 4);
 }
 TEST(SceneKindsEndToEndTest, Plaza) {
   ExpectTracks(RunSmallDrive(SceneKind::kPlaza, 2), 0.05, 0.12);

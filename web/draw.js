@@ -7,6 +7,7 @@ export const QUALITY_COLOURS = {
   FRAME: '#2e8540',
   INTERPOLATED: '#c25e00',
   COASTING: '#c0162b',
+  MOTION_ONLY: '#7d5ba6',
   KIND_UNSPECIFIED: '#6b6b6b',
 };
 const PLANE_COLOUR = '#7a4fa0';

@@ -86,6 +86,11 @@ int RunEvalTrajectory(int argc, char** argv) {
       ->type_name("N")
       ->capture_default_str();
   app.add_flag("--fresh", fresh, "simulate again even if a drive is on disk");
+  // Ablation of the pipeline's default (the struct's default shown).
+  app.add_option("--motion-only-steps", eo.pipeline.motion_only_steps,
+                 "track pairs with motion but no plane (PipelineOptions::motion_only_steps)")
+      ->type_name("BOOL")
+      ->capture_default_str();
   if (int rc = cl.Parse(argc, argv); rc >= 0) return rc;
   if (!cl.positional().empty()) {
     return Fail("eval-trajectory", "unexpected argument '" + cl.positional()[0] + "'", 2);

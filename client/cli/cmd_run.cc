@@ -211,6 +211,11 @@ int RunRun(int argc, char** argv) {
   app.add_option("--refine-window", po.refine.window_anchors, "anchors in the refinement window")
       ->type_name("N")
       ->capture_default_str();
+  app.add_option("--motion-only-steps", po.motion_only_steps,
+                 "track pairs with motion but no plane from their rotation and direction "
+                 "(docs/METHOD.md)")
+      ->type_name("BOOL")
+      ->capture_default_str();
   bool quiet = false;
   app.add_flag("--quiet", quiet, "no progress line");
   MvReaderOptions ro;
@@ -298,9 +303,11 @@ int RunRun(int argc, char** argv) {
               pipeline.metric() ? "metres" : "up to scale: first step = 1");
   std::map<PoseKind, int> kinds;
   for (const FramePose& p : pipeline.poses()) ++kinds[p.quality.kind];
-  std::printf("poses      %zu frames posed: %d anchor, %d coasting, %d frame, %d interpolated\n",
-              pipeline.poses().size(), kinds[PoseKind::kAnchor], kinds[PoseKind::kCoasting],
-              kinds[PoseKind::kFrame], kinds[PoseKind::kInterpolated]);
+  std::printf(
+      "poses      %zu frames posed: %d anchor, %d coasting, %d motion-only, %d frame, %d "
+      "interpolated\n",
+      pipeline.poses().size(), kinds[PoseKind::kAnchor], kinds[PoseKind::kCoasting],
+      kinds[PoseKind::kMotionOnly], kinds[PoseKind::kFrame], kinds[PoseKind::kInterpolated]);
   if (!scale_note.empty()) std::printf("scale      %s\n", scale_note.c_str());
 
   if (pipeline.trajectory().empty()) {

@@ -32,6 +32,8 @@ const char* PoseKindName(PoseKind kind) {
       return "INTERPOLATED";
     case PoseKind::kCoasting:
       return "COASTING";
+    case PoseKind::kMotionOnly:
+      return "MOTION_ONLY";
   }
   return "?";
 }

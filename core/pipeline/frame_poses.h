@@ -41,8 +41,12 @@ enum class PoseKind {
   kFrame = 2,         // a frame between anchors, from its own motion vectors
   kInterpolated = 3,  // a frame between anchors without a model: the anchors' interpolation
   kCoasting = 4,      // an anchor the filter only predicted (no plane observed)
+  // An anchor without a plane observed whose rotation and direction of travel
+  // come from the pair's epipolar geometry; its step length is the filter's
+  // motion model (PlaneEkf::UpdateMotion).
+  kMotionOnly = 5,
 };
-// "ANCHOR", "FRAME", "INTERPOLATED", "COASTING".
+// "ANCHOR", "FRAME", "INTERPOLATED", "COASTING", "MOTION_ONLY".
 const char* PoseKindName(PoseKind kind);
 
 // How much a pose can be trusted.

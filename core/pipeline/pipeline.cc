@@ -89,7 +89,7 @@ PipelineStep Pipeline::Process(const FrontEndStep& front) {
   } else if (!ekf_.initialized()) {
     Initialise(front, observations, dt_s, &step);
   } else {
-    Advance(observations, dt_s, &step);
+    Advance(front, observations, dt_s, &step);
   }
   step.times.ekf_ms = MsSince(t0);
   if (step.tracking && !IsFinite(world_from_cam_)) RestartOnNonFinite(world_from_cam_before, &step);
@@ -97,7 +97,10 @@ PipelineStep Pipeline::Process(const FrontEndStep& front) {
     for (const ExtractedPlane& ex : step.extracted) {
       step.extracted_filter_ids.push_back(ekf_.FilterTrackId(ex.track_id));
     }
-    if (options_.window_refine) {
+    if (options_.window_refine && (step.ekf.motion_updated || step.motion_only_start)) {
+      // No plane to refine against: the window restarts when planes return.
+      refiner_.Reset();
+    } else if (options_.window_refine) {
       const auto t1 = std::chrono::steady_clock::now();
       RefineWindow(pair, &step);
       step.times.refine_ms = MsSince(t1);
@@ -173,7 +176,8 @@ void Pipeline::Initialise(const FrontEndStep& front,
     step->note = "waiting to initialise: no reliable motion between the anchors";
     return;
   }
-  if (static_cast<int>(step->extracted.size()) < options_.min_planes_to_initialise) {
+  if (static_cast<int>(step->extracted.size()) < options_.min_planes_to_initialise &&
+      !options_.motion_only_steps) {
     step->note = "waiting to initialise: no plane extracted";
     return;
   }
@@ -193,12 +197,19 @@ void Pipeline::Initialise(const FrontEndStep& front,
   }
   world_from_cam_ = world_from_cam_ * ekf_.prev_from_cur();
   step->tracking = true;
+  step->motion_only_start = ekf_.planes().empty();
 }
 
-void Pipeline::Advance(const std::vector<PlaneObservation>& observations, double dt_s,
+void Pipeline::Advance(const FrontEndStep& front,
+                       const std::vector<PlaneObservation>& observations, double dt_s,
                        PipelineStep* step) {
   Status s = ekf_.Predict(dt_s);
   if (s.ok()) s = ekf_.Update(observations, &step->ekf);
+  // No tracked plane observed: the pair's own motion, where it has one.
+  if (s.ok() && step->ekf.skipped && options_.motion_only_steps && front.infinity.ok() &&
+      front.infinity->has_motion) {
+    s = ekf_.UpdateMotion(front.infinity->later_from_earlier.Inverse(), &step->ekf);
+  }
   if (!s.ok()) {
     // Numerical failure: restart the filter on a later pair; the trajectory
     // continues from the last pose at the last step's speed (InitialStepLength).
@@ -277,6 +288,12 @@ PoseQuality Pipeline::AnchorQuality(const PipelineStep& step) const {
   PoseQuality q;
   q.kind = step.ekf.skipped ? PoseKind::kCoasting : PoseKind::kAnchor;
   if (step.ekf.skipped) q.note = "no tracked plane observed: the motion model's prediction";
+  if (step.ekf.skipped && (step.ekf.motion_updated || step.motion_only_start)) {
+    q.kind = PoseKind::kMotionOnly;
+    q.note =
+        "no tracked plane observed: rotation and direction of travel from the pair's motion, "
+        "step length from the motion model";
+  }
   // The step translation's covariance (error state [dtheta, dt, ...]).
   const Eigen::MatrixXd& P = ekf_.covariance();
   q.position_sigma = P.rows() >= 6 ? std::sqrt(std::max(0.0, P.block<3, 3>(3, 3).trace())) : 0.0;

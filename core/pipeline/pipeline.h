@@ -62,8 +62,17 @@ struct ScaleOptions {
 struct PipelineOptions : FrontEndOptions {
   EkfOptions ekf;
   ScaleOptions scale;
-  // Initialise only on a pair with motion and at least this many planes.
+  // Initialise only on a pair with motion and at least this many planes
+  // (unless motion_only_steps).
   int min_planes_to_initialise = 1;
+  // Motion-only steps (docs/METHOD.md "Motion-only steps"): a pair with
+  // reliable motion but no plane observed still tracks. It initialises the
+  // filter (no planes needed), and where no tracked plane is observed the
+  // filter takes the pair's epipolar rotation and direction of travel
+  // (PlaneEkf::UpdateMotion) instead of only predicting; the step length is
+  // the motion model's. Such anchors are PoseKind::kMotionOnly. Off: such
+  // pairs wait ("no plane extracted") or coast, as the paper's method does.
+  bool motion_only_steps = true;
   // Poses of the frames between anchors (core/pipeline/frame_poses.h).
   FramePoserOptions frame_poses;
   // Sliding-window refinement of the last anchors' poses and the planes they
@@ -129,6 +138,8 @@ struct PipelineStep {
   std::string scale_note;
   StageTimes times;
   std::string note;  // why the step did not track, if it did not
+  // The filter (re)started on this pair without a plane (motion_only_steps).
+  bool motion_only_start = false;
   // The all-frames poses this step added, in display order: when tracking,
   // the frames between the anchors and the later anchor (and the earlier
   // anchor when the trajectory (re)starts on it); see Pipeline::poses().
@@ -199,7 +210,8 @@ class Pipeline {
   void Initialise(const FrontEndStep& front, const std::vector<PlaneObservation>& observations,
                   double dt_s, PipelineStep* step);
   // Predicts and updates the running filter (a numerical failure resets it).
-  void Advance(const std::vector<PlaneObservation>& observations, double dt_s, PipelineStep* step);
+  void Advance(const FrontEndStep& front, const std::vector<PlaneObservation>& observations,
+               double dt_s, PipelineStep* step);
   // The first step's length when the filter starts: on re-initialisation the
   // last step's speed times dt_s, else from the scale source (may set metric_).
   double InitialStepLength(double dt_s);

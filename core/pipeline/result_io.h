@@ -31,7 +31,7 @@ std::vector<TimedPose> TimedPosesOf(const std::vector<FramePose>& poses);
 // trajectory_quality.csv, one row per pose in the order of the TUM file
 // written from the same poses (docs/TRAJECTORY.md "Per-frame poses"):
 //   frame_index,timestamp_s,kind,position_sigma,inliers,rms_px,revision,gap_frames,note
-// kind: ANCHOR | FRAME | INTERPOLATED | COASTING; position_sigma in the
+// kind: ANCHOR | FRAME | INTERPOLATED | COASTING | MOTION_ONLY; position_sigma in the
 // trajectory's unit ("nan": none, see PoseQuality); note quoted.
 void WritePoseQualityCsv(const std::vector<FramePose>& poses, std::ostream& out);
 // In parts, as WriteTrajectoryTumHeader / Rows.

@@ -33,6 +33,7 @@ struct Run {
   std::vector<PlaneEstimate> planes;
   bool metric = false;
   int pairs = 0, tracked = 0;
+  int motion_only_anchors = 0;  // anchors posed without a plane (PoseKind::kMotionOnly)
   std::map<std::string, int> notes;
 };
 
@@ -52,6 +53,9 @@ StatusOr<Run> RunPipeline(const std::vector<FrameRecord>& frames, const Intrinsi
   }
   for (const auto& p : pipeline.trajectory()) run.poses.push_back(p);
   run.frame_poses = TimedPosesOf(pipeline.poses());
+  for (const FramePose& p : pipeline.poses()) {
+    run.motion_only_anchors += p.quality.kind == PoseKind::kMotionOnly;
+  }
   run.metric = pipeline.metric();
   return run;
 }
@@ -129,6 +133,7 @@ StatusOr<DriveResult> EvaluateDrive(const DriveSpec& spec, const DriveEvalOption
   r.posed_frames = static_cast<int>(base->frame_poses.size());
   r.anchor_pairs = base->pairs;
   r.tracked_pairs = base->tracked;
+  r.motion_only_anchors = base->motion_only_anchors;
   int most = 0;
   for (const auto& [note, n] : base->notes) {
     if (n > most) most = n, r.note = note;
@@ -280,6 +285,14 @@ std::string DriveResultsMarkdown(const std::vector<DriveResult>& results,
        << (r.first_pose_frame >= 0 ? Fmt("at %.2f s", r.first_pose_s) : std::string("never"))
        << (r.note.empty() ? "" : "; \"" + r.note + "\"") << "\n";
   }
+  // Where the planes did not carry the trajectory.
+  md << "\nDrives with motion-only anchors (no plane observed: rotation and direction from the "
+        "pair, step length from the motion model):\n\n";
+  for (const DriveResult& r : results) {
+    if (r.motion_only_anchors == 0) continue;
+    md << "- " << r.spec.name << ": " << r.motion_only_anchors << " of " << r.tracked_pairs
+       << " tracked anchors\n";
+  }
   return md.str();
 }
 
@@ -290,7 +303,7 @@ std::string DriveResultsCsv(const std::vector<DriveResult>& results) {
          "ate_pct,anchor_ate_m,eps_D,rpe_m,rpe_deg,planes_evaluated,eps_d_m,eps_n_deg,metric_"
          "height,"
          "scale_err_height,metric_speed,scale_err_speed,metric_first_step,scale_err_first_step,"
-         "camera_height_m,pitch_down_deg,simulate_s,evaluate_s,note\n";
+         "camera_height_m,pitch_down_deg,simulate_s,evaluate_s,note,motion_only_anchors\n";
   for (const DriveResult& r : results) {
     const SimulateOptions& o = r.spec.sim;
     std::string note = r.note;
@@ -307,7 +320,7 @@ std::string DriveResultsCsv(const std::vector<DriveResult>& results) {
       csv << "," << (r.metric[k] ? 1 : 0) << "," << r.scale_error[k];
     }
     csv << "," << o.camera_height_min_m << "," << o.pitch_down_min_deg << "," << r.simulate_s << ","
-        << r.evaluate_s << ",\"" << note << "\"\n";
+        << r.evaluate_s << ",\"" << note << "\"," << r.motion_only_anchors << "\n";
   }
   return csv.str();
 }

@@ -10,7 +10,9 @@
 namespace slapse {
 namespace {
 
-bool IsAnchorKind(PoseKind k) { return k == PoseKind::kAnchor || k == PoseKind::kCoasting; }
+bool IsAnchorKind(PoseKind k) {
+  return k == PoseKind::kAnchor || k == PoseKind::kCoasting || k == PoseKind::kMotionOnly;
+}
 
 void Add(double e, PositionErrorStats* s, double rot_deg = 0.0) {
   ++s->poses;
