@@ -119,15 +119,41 @@ GstPadProbeReturn RoundToTicks(GstPad*, GstPadProbeInfo* info, gpointer) {
   return GST_PAD_PROBE_OK;
 }
 
+bool IsFrom(GstElement* element, const char* factory_name) {
+  GstElementFactory* factory = gst_element_get_factory(element);
+  return factory != nullptr && g_strcmp0(GST_OBJECT_NAME(factory), factory_name) == 0;
+}
+
+// Each RTP session of the media's rtpbin, as it is made: the RTCP it would
+// send the publisher (receiver reports) is dropped; the publisher's own RTCP
+// is still read. A publisher reads nothing it did not ask for once it stops
+// sending, and closing a TCP socket that holds unread bytes aborts the
+// connection (RST) and throws away what the publisher had queued but not yet
+// sent: ffmpeg sends its TEARDOWN without waiting for the answer and closes
+// at once, so a receiver report that arrived in that last moment cost the
+// TEARDOWN (and the last frame, still in the parser): "lost without a
+// TEARDOWN" after all but one frame (docs/BENCHMARKS.md).
+GstPadProbeReturn DropBuffers(GstPad*, GstPadProbeInfo*, gpointer) { return GST_PAD_PROBE_DROP; }
+
+void OnRtpSessionPadAdded(GstElement*, GstPad* pad, gpointer) {
+  if (g_strcmp0(GST_PAD_NAME(pad), "send_rtcp_src") != 0) return;
+  gst_pad_add_probe(pad, GstPadProbeType(GST_PAD_PROBE_TYPE_BUFFER | GST_PAD_PROBE_TYPE_BUFFER_LIST),
+                    &DropBuffers, nullptr, nullptr);
+}
+
+void OnDeepElementAdded(GstBin*, GstBin*, GstElement* element, gpointer) {
+  if (IsFrom(element, "rtpsession")) {
+    g_signal_connect(element, "pad-added", G_CALLBACK(OnRtpSessionPadAdded), nullptr);
+  }
+}
+
 // The media's rtpbin, as it is added to the pipeline: timestamps from the
 // RTP timestamps alone (buffer-mode "none"). The default ("slave") smooths
 // them toward arrival times, which shifts every frame's stream time (3 s of
 // video read as 2.7 s), so a drive published live would not equal its
 // offline run.
 void OnElementAdded(GstBin*, GstElement* element, gpointer) {
-  GstElementFactory* factory = gst_element_get_factory(element);
-  if (factory == nullptr || g_strcmp0(GST_OBJECT_NAME(factory), "rtpbin") != 0) return;
-  gst_util_set_object_arg(G_OBJECT(element), "buffer-mode", "none");
+  if (IsFrom(element, "rtpbin")) gst_util_set_object_arg(G_OBJECT(element), "buffer-mode", "none");
 }
 
 void OnUnprepared(GstRTSPMedia*, gpointer data) {
@@ -276,6 +302,7 @@ void RtspIngest::Impl::OnMediaConfigure(GstRTSPMediaFactory*, GstRTSPMedia* medi
   GstObject* pipeline = gst_object_get_parent(GST_OBJECT(bin));
   if (pipeline != nullptr) {
     g_signal_connect(pipeline, "element-added", G_CALLBACK(OnElementAdded), nullptr);
+    g_signal_connect(pipeline, "deep-element-added", G_CALLBACK(OnDeepElementAdded), nullptr);
     gst_object_unref(pipeline);
   }
   GstElement* ticks = gst_bin_get_by_name(GST_BIN(bin), "ticks");
