@@ -17,8 +17,8 @@
 
 #include "core/common/angles.h"
 #include "core/common/so3.h"
-#include "core/estimators/relative_pose.h"
 #include "core/estimators/pair_motion.h"
+#include "core/estimators/relative_pose.h"
 #include "core/mv/mv_reader.h"
 #include "core/pipeline/front_end.h"
 #include "lab/gt/ground_truth.h"
@@ -74,8 +74,7 @@ void CountAgainstTruth(const slapse::AnchorPair& pair, const slapse::Intrinsics&
 // The road's (plane 0) correspondences: *n of them, *ok within 1 px of the
 // true transfer, *ok_par of those with true rotation-only parallax >= tau_inf.
 void CountRoad(const slapse::AnchorPair& pair, const slapse::GroundTruth& gt,
-               const slapse::Rigid3d& truth, double min_parallax_px, int* n, int* ok,
-               int* ok_par) {
+               const slapse::Rigid3d& truth, double min_parallax_px, int* n, int* ok, int* ok_par) {
   *n = *ok = *ok_par = 0;
   const Eigen::Matrix3d KRKinv = gt.intrinsics.K() * truth.R() * gt.intrinsics.K().inverse();
   for (const slapse::Correspondence& c : pair.correspondences) {
@@ -102,16 +101,16 @@ void PrintPair(const slapse::AnchorPair& pair, const slapse::PairMotionReport& r
   CountAgainstTruth(pair, k, truth, o.ransac_threshold_px, o.tau_inf_px, &true_in, &true_par);
   CountRoad(pair, gt, truth, o.tau_inf_px, &road, &road_ok, &road_ok_par);
   const double er = r.has_motion ? AngleDeg(r.later_from_earlier.R(), truth.R()) : -1;
-  const double et = r.has_motion ? slapse::AngleBetweenDeg(r.later_from_earlier.translation,
-                                                           truth.translation)
-                                 : -1;
+  const double et =
+      r.has_motion ? slapse::AngleBetweenDeg(r.later_from_earlier.translation, truth.translation)
+                   : -1;
   std::printf(
       "  %lld-%lld n %zu motion %d e_in %d cheir %d rot_out %d par_in %d samp_in %d band %d | "
       "true_in %d true_par %d road %d ok %d ok_par %d |t| %.2f | err rot %.3f dir %.2f\n",
       static_cast<long long>(pair.earlier_index), static_cast<long long>(pair.later_index),
-      pair.correspondences.size(), r.has_motion ? 1 : 0, r.num_e_inliers,
-      r.num_cheirality_inliers, r.num_rotation_outliers, r.num_parallax_inliers,
-      r.num_parallax_sampson_inliers, r.num_parallax_control_band, true_in, true_par, road, road_ok, road_ok_par,
+      pair.correspondences.size(), r.has_motion ? 1 : 0, r.num_e_inliers, r.num_cheirality_inliers,
+      r.num_rotation_outliers, r.num_parallax_inliers, r.num_parallax_sampson_inliers,
+      r.num_parallax_control_band, true_in, true_par, road, road_ok, road_ok_par,
       truth.translation.norm(), er, et);
 }
 

@@ -137,7 +137,8 @@ GstPadProbeReturn DropBuffers(GstPad*, GstPadProbeInfo*, gpointer) { return GST_
 
 void OnRtpSessionPadAdded(GstElement*, GstPad* pad, gpointer) {
   if (g_strcmp0(GST_PAD_NAME(pad), "send_rtcp_src") != 0) return;
-  gst_pad_add_probe(pad, GstPadProbeType(GST_PAD_PROBE_TYPE_BUFFER | GST_PAD_PROBE_TYPE_BUFFER_LIST),
+  gst_pad_add_probe(pad,
+                    GstPadProbeType(GST_PAD_PROBE_TYPE_BUFFER | GST_PAD_PROBE_TYPE_BUFFER_LIST),
                     &DropBuffers, nullptr, nullptr);
 }
 

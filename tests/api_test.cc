@@ -441,9 +441,8 @@ TEST(ValidateTest, ReconnectPolicySdpAndPath) {
 // A per-frame pose and its quality survive FramePose and Trajectory.Point
 // both ways, every kind (the wire enum shares the core enum's values).
 TEST(FramePoseRoundTrip, EveryKindAndField) {
-  for (PoseKind kind :
-       {PoseKind::kAnchor, PoseKind::kFrame, PoseKind::kInterpolated, PoseKind::kCoasting,
-        PoseKind::kMotionOnly}) {
+  for (PoseKind kind : {PoseKind::kAnchor, PoseKind::kFrame, PoseKind::kInterpolated,
+                        PoseKind::kCoasting, PoseKind::kMotionOnly}) {
     FramePose p;
     p.pose.index = 42;
     p.pose.timestamp_s = 1.4;

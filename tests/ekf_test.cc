@@ -122,10 +122,11 @@ TEST(EkfJacobians, MotionErrorMatchesFiniteDifferences) {
     Eigen::Matrix<double, 5, 6> J;
     PlaneEkf::MotionError(fx.R, fx.t, measured, &J);
     auto f = [&](const Eigen::VectorXd& d) {
-      return Eigen::VectorXd(PlaneEkf::MotionError(fx.R * ExpSO3(d.head<3>()),
-                                                   fx.t + d.tail<3>(), measured, nullptr));
+      return Eigen::VectorXd(
+          PlaneEkf::MotionError(fx.R * ExpSO3(d.head<3>()), fx.t + d.tail<3>(), measured, nullptr));
     };
-    const Eigen::MatrixXd n = NumericJacobian(f, [](const Eigen::VectorXd& d) { return d; }, 6);
+    const Eigen::MatrixXd n = NumericJacobian(
+        f, [](const Eigen::VectorXd& d) { return d; }, 6);
     EXPECT_LT((n - J).norm(), 1e-7) << n << "\n\n" << J;
   }
   // Zero at the measurement itself, whatever the step's length.
@@ -274,8 +275,7 @@ TEST(PlaneEkfTest, TracksMotionAndPlanesOnExactCorrespondences) {
     const Eigen::Vector3d true_pi = n_c / d_c;
     const double depth = 1.0 / track.pi.norm(), true_depth = 1.0 / true_pi.norm();
     EXPECT_NEAR(depth, true_depth, 0.02 * true_depth) << "plane " << track.track_id;
-    EXPECT_LT(AngleBetweenDeg(track.pi, true_pi), 1.0)
-        << "plane " << track.track_id;
+    EXPECT_LT(AngleBetweenDeg(track.pi, true_pi), 1.0) << "plane " << track.track_id;
   }
 }
 
@@ -488,10 +488,10 @@ TEST(PlaneEkfTest, MotionMeasurementsFollowATurnWithoutPlanes) {
   double worst_with_deg = 0, worst_without_deg = 0;
   for (size_t k = 2; k < poses.size(); ++k) {
     const Rigid3d truth = poses[k - 1].Inverse() * poses[k];
-    Rigid3d measured(truth.R() * ExpSO3(Eigen::Vector3d(rot_noise(rng), rot_noise(rng),
-                                                        rot_noise(rng))),
-                     5.0 * (ExpSO3(Eigen::Vector3d(dir_noise(rng), dir_noise(rng), 0)) *
-                            truth.translation));  // length: not observed
+    Rigid3d measured(
+        truth.R() * ExpSO3(Eigen::Vector3d(rot_noise(rng), rot_noise(rng), rot_noise(rng))),
+        5.0 * (ExpSO3(Eigen::Vector3d(dir_noise(rng), dir_noise(rng), 0)) *
+               truth.translation));  // length: not observed
     ASSERT_TRUE(with.Predict(dt).ok());
     ASSERT_TRUE(without.Predict(dt).ok());
     UpdateReport rep;

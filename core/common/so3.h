@@ -35,4 +35,17 @@ inline Eigen::Matrix3d RightJacobianSO3(const Eigen::Vector3d& w) {
          (a - std::sin(a)) / (a * a * a) * s * s;
 }
 
+// An orthonormal basis [b_0 b_1] (3x2) of the plane orthogonal to the unit
+// vector t (the tangent space of the unit sphere at t).
+inline Eigen::Matrix<double, 3, 2> TangentBasis(const Eigen::Vector3d& t) {
+  // The axis least aligned with t gives a well-conditioned cross product.
+  Eigen::Vector3d::Index axis;
+  t.cwiseAbs().minCoeff(&axis);
+  const Eigen::Vector3d b0 = t.cross(Eigen::Vector3d::Unit(axis)).normalized();
+  Eigen::Matrix<double, 3, 2> basis;
+  basis.col(0) = b0;
+  basis.col(1) = t.cross(b0).normalized();
+  return basis;
+}
+
 }  // namespace slapse

@@ -25,16 +25,6 @@ bool InverseSpd(const Eigen::MatrixXd& a, Eigen::MatrixXd* inv) {
   return inv->allFinite();
 }
 
-// An orthonormal basis (3x2) of the plane orthogonal to the unit vector u.
-Eigen::Matrix<double, 3, 2> OrthogonalBasis(const Eigen::Vector3d& u) {
-  const Eigen::Vector3d a =
-      std::abs(u.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
-  const Eigen::Vector3d b0 = u.cross(a).normalized();
-  Eigen::Matrix<double, 3, 2> basis;
-  basis << b0, u.cross(b0);
-  return basis;
-}
-
 }  // namespace
 
 PlaneEkf::PlaneEkf(const Intrinsics& intrinsics, EkfOptions options)
@@ -684,11 +674,12 @@ void PlaneEkf::PinScale(const std::vector<TrackedObservation>& tracked,
   }
 }
 
-Eigen::Matrix<double, 5, 1> PlaneEkf::MotionError(const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
+Eigen::Matrix<double, 5, 1> PlaneEkf::MotionError(const Eigen::Matrix3d& R,
+                                                  const Eigen::Vector3d& t,
                                                   const Rigid3d& measured_prev_from_cur,
                                                   Eigen::Matrix<double, 5, 6>* J) {
   const Eigen::Vector3d u_m = measured_prev_from_cur.translation.normalized();
-  const Eigen::Matrix<double, 3, 2> B = OrthogonalBasis(u_m);
+  const Eigen::Matrix<double, 3, 2> B = TangentBasis(u_m);
   const Eigen::Vector3d rot = LogSO3(measured_prev_from_cur.R().transpose() * R);
   const double t_norm = t.norm();
   const Eigen::Vector3d u = t / t_norm;

@@ -112,8 +112,8 @@ struct EkfOptions {
   // observed. Standard deviations per axis: bench/motion_accuracy measures
   // 0.06-0.8 deg of rotation and 0.4-6 deg of direction error on the rural
   // and highway tuning drives (with the rare wrong fit the gate refuses).
-  double motion_rotation_sigma_rad = 0.008;   // ~0.5 deg
-  double motion_direction_sigma_rad = 0.06;   // ~3.4 deg
+  double motion_rotation_sigma_rad = 0.008;  // ~0.5 deg
+  double motion_direction_sigma_rad = 0.06;  // ~3.4 deg
   // A measurement whose squared Mahalanobis innovation (5 dof) exceeds this
   // is refused (99.9 % of a chi-square with 5 dof: 20.5); 0 = no gate.
   double motion_gate_chi2 = 20.5;
@@ -241,8 +241,8 @@ class PlaneEkf {
   // The motion measurement's prediction error for a step (R, t) against a
   // measured (R_m, u_m = direction of t_m), and (optionally) its Jacobian
   // w.r.t. [dtheta, dt] (R = R_hat Exp(dtheta), t additive):
-  //   e = [ Log(R_m^T R) ; B^T t / |t| ]   (5; B: an orthonormal 3x2 basis
-  //                                          orthogonal to u_m, so e = 0 at the measurement)
+  //   e = [ Log(R_m^T R) ; B^T t / |t| ]   (5; B = TangentBasis(u_m), core/common/so3.h,
+  //                                          so e = 0 at the measurement)
   //   de_rot/ddtheta = Jr(Log(R_m^T R))^-1,   de_dir/dt = B^T (I - u u^T) / |t|,  u = t / |t|.
   static Eigen::Matrix<double, 5, 1> MotionError(const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
                                                  const Rigid3d& measured_prev_from_cur,

@@ -69,17 +69,6 @@ Eigen::Matrix<double, 9, 5> EssentialJacobian(const Eigen::Matrix3d& R, const Ei
   return J;
 }
 
-Eigen::Matrix<double, 3, 2> TangentBasis(const Eigen::Vector3d& t) {
-  // The axis least aligned with t gives a well-conditioned cross product.
-  Eigen::Vector3d::Index axis;
-  t.cwiseAbs().minCoeff(&axis);
-  const Eigen::Vector3d b0 = t.cross(Eigen::Vector3d::Unit(axis)).normalized();
-  Eigen::Matrix<double, 3, 2> basis;
-  basis.col(0) = b0;
-  basis.col(1) = t.cross(b0).normalized();
-  return basis;
-}
-
 namespace {
 
 // One Levenberg-Marquardt step on sum r_i^2 over the selected points: the

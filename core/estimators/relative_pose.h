@@ -67,9 +67,6 @@ double SampsonDistance(const Eigen::Matrix3d& E, const Eigen::Vector3d& ray_earl
 Eigen::Matrix<double, 9, 5> EssentialJacobian(const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
                                               const Eigen::Matrix<double, 3, 2>& basis);
 
-// An orthonormal basis of the plane orthogonal to the unit vector t.
-Eigen::Matrix<double, 3, 2> TangentBasis(const Eigen::Vector3d& t);
-
 // Refines `initial_later_from_earlier` (its t is normalised; |t| > 0 needed)
 // on the rays. Deterministic.
 RelativePoseRefineReport RefineRelativePose(const std::vector<Eigen::Vector3d>& rays_earlier,

@@ -97,7 +97,7 @@ PipelineStep Pipeline::Process(const FrontEndStep& front) {
     for (const ExtractedPlane& ex : step.extracted) {
       step.extracted_filter_ids.push_back(ekf_.FilterTrackId(ex.track_id));
     }
-    if (options_.window_refine && (step.ekf.motion_updated || step.motion_only_start)) {
+    if (options_.window_refine && step.motion_only()) {
       // No plane to refine against: the window restarts when planes return.
       refiner_.Reset();
     } else if (options_.window_refine) {
@@ -200,9 +200,8 @@ void Pipeline::Initialise(const FrontEndStep& front,
   step->motion_only_start = ekf_.planes().empty();
 }
 
-void Pipeline::Advance(const FrontEndStep& front,
-                       const std::vector<PlaneObservation>& observations, double dt_s,
-                       PipelineStep* step) {
+void Pipeline::Advance(const FrontEndStep& front, const std::vector<PlaneObservation>& observations,
+                       double dt_s, PipelineStep* step) {
   Status s = ekf_.Predict(dt_s);
   if (s.ok()) s = ekf_.Update(observations, &step->ekf);
   // No tracked plane observed: the pair's own motion, where it has one.
@@ -288,7 +287,7 @@ PoseQuality Pipeline::AnchorQuality(const PipelineStep& step) const {
   PoseQuality q;
   q.kind = step.ekf.skipped ? PoseKind::kCoasting : PoseKind::kAnchor;
   if (step.ekf.skipped) q.note = "no tracked plane observed: the motion model's prediction";
-  if (step.ekf.skipped && (step.ekf.motion_updated || step.motion_only_start)) {
+  if (step.motion_only()) {
     q.kind = PoseKind::kMotionOnly;
     q.note =
         "no tracked plane observed: rotation and direction of travel from the pair's motion, "

@@ -140,6 +140,9 @@ struct PipelineStep {
   std::string note;  // why the step did not track, if it did not
   // The filter (re)started on this pair without a plane (motion_only_steps).
   bool motion_only_start = false;
+  // No plane carried this step, the pair's own motion did (a MOTION_ONLY
+  // anchor): the filter started on it without a plane, or took its motion.
+  bool motion_only() const { return motion_only_start || ekf.motion_updated; }
   // The all-frames poses this step added, in display order: when tracking,
   // the frames between the anchors and the later anchor (and the earlier
   // anchor when the trajectory (re)starts on it); see Pipeline::poses().

@@ -38,7 +38,7 @@ struct DriveResult {
   int64_t first_pose_frame = -1;  // -1: never
   double first_pose_s = -1.0;
   int anchor_pairs = 0, tracked_pairs = 0;
-  int motion_only_anchors = 0;  // tracked anchors without a plane (PoseKind::kMotionOnly)
+  int motion_only_anchors = 0;    // tracked anchors without a plane (PoseKind::kMotionOnly)
   double drive_distance_m = 0.0;  // the true path, whole drive
   bool evaluated = false;         // >= 3 poses: the errors below are valid
   double distance_m = 0.0;        // the true path over the posed frames

@@ -22,7 +22,7 @@ struct PositionErrorStats {
 };
 
 struct FramePoseErrors {
-  TrajectoryErrors anchors;         // EvaluateTrajectory on the ANCHOR / COASTING / MOTION_ONLY poses
+  TrajectoryErrors anchors;         // EvaluateTrajectory on ANCHOR/COASTING/MOTION_ONLY poses
   PositionErrorStats anchor;        // their position errors after that alignment
   PositionErrorStats frame;         // FRAME poses (own estimate)
   PositionErrorStats interpolated;  // INTERPOLATED poses
