@@ -271,7 +271,13 @@ TEST(DriveTableTest, FixedSplitCoveringEveryKindRateAndSize) {
   EXPECT_FALSE(ParseDriveName("rural").ok());
   EXPECT_TRUE(EncoderProfile("h264-ippp").ok());
   EXPECT_EQ(EncoderProfile("h264-ippp")->b_frames, 0);
-  EXPECT_FALSE(EncoderProfile("vp9").ok());
+  // Camera-like presets are profiles too, their GOP in seconds of the drive.
+  ASSERT_TRUE(EncoderProfile("h264-baseline-ippp-2s", 25.0).ok());
+  EXPECT_EQ(EncoderProfile("h264-baseline-ippp-2s", 25.0)->gop_size, 50);
+  EXPECT_EQ(EncoderProfile("h264-baseline-ippp-2s", 10.0)->gop_size, 20);
+  EXPECT_EQ(EncoderProfile("hevc", 30.0)->codec, VideoCodec::kHevc);
+  EXPECT_FALSE(EncoderProfile("h265-ippp").ok());
+  EXPECT_FALSE(EncoderProfile("h264-baseline-ippp-2s", 0.0).ok());
 }
 
 }  // namespace

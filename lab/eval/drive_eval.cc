@@ -105,7 +105,7 @@ StatusOr<DriveResult> EvaluateDrive(const DriveSpec& spec, const DriveEvalOption
       (std::filesystem::path(options.out_dir) / options.profile / spec.name).string();
   const auto t0 = Clock::now();
   SLAPSE_RETURN_IF_ERROR(
-      EnsureSimulated(spec, *EncoderProfile(options.profile), dir, options.reuse));
+      EnsureSimulated(spec, *EncoderProfile(options.profile, spec.sim.fps), dir, options.reuse));
   const auto t1 = Clock::now();
   r.simulate_s = SecondsBetween(t0, t1);
 

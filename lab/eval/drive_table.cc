@@ -92,11 +92,26 @@ StatusOr<DriveSpec> ParseDriveName(const std::string& name) {
   return MakeDriveSpec(*kind, std::stoi(digits));
 }
 
+namespace {
+const char* const kYardstickProfiles[] = {"mpeg2-ibbbp", "mpeg4-ibbbp", "h264-ibbbp", "h264-ippp"};
+}  // namespace
+
 std::vector<std::string> EncoderProfileNames() {
-  return {"mpeg2-ibbbp", "mpeg4-ibbbp", "h264-ibbbp", "h264-ippp"};
+  std::vector<std::string> names(std::begin(kYardstickProfiles), std::end(kYardstickProfiles));
+  for (const std::string& n : EncoderPresetNames()) {
+    if (std::find(names.begin(), names.end(), n) == names.end()) names.push_back(n);
+  }
+  return names;
 }
 
-StatusOr<EncoderOptions> EncoderProfile(const std::string& name) {
+StatusOr<EncoderOptions> EncoderProfile(const std::string& name, double fps) {
+  if (std::find(std::begin(kYardstickProfiles), std::end(kYardstickProfiles), name) ==
+      std::end(kYardstickProfiles)) {
+    const auto names = EncoderPresetNames();
+    if (std::find(names.begin(), names.end(), name) != names.end()) {
+      return EncoderPreset(name, fps);
+    }
+  }
   EncoderOptions e;
   e.gop_size = 12;
   if (name == "mpeg2-ibbbp") {

@@ -46,9 +46,12 @@ std::vector<DriveSpec> DriveTable(int seeds_per_kind = 8);
 StatusOr<DriveSpec> ParseDriveName(const std::string& name);
 
 // The encoder profiles the yardstick runs (the codec is a parameter):
-//   mpeg2-ibbbp (default), mpeg4-ibbbp, h264-ibbbp, h264-ippp.
-// GOP 12 frames; MPEG quantiser 4, H.264 CRF 20 (slapse simulate's defaults).
-StatusOr<EncoderOptions> EncoderProfile(const std::string& name);
+//   mpeg2-ibbbp (default), mpeg4-ibbbp, h264-ibbbp, h264-ippp: GOP 12 frames;
+//   MPEG quantiser 4, H.264 CRF 20 (slapse simulate's defaults);
+//   and every camera-like preset of lab/codec EncoderPreset (e.g.
+//   h264-baseline-ippp-2s, h264-high-bpyr-3ref, hevc), whose GOPs are in
+//   seconds: fps is the drive's frame rate.
+StatusOr<EncoderOptions> EncoderProfile(const std::string& name, double fps = 30.0);
 std::vector<std::string> EncoderProfileNames();
 
 }  // namespace slapse
