@@ -72,10 +72,14 @@ void CountAgainstTruth(const slapse::AnchorPair& pair, const slapse::Intrinsics&
 }
 
 // The road's (plane 0) correspondences: *n of them, *ok within 1 px of the
-// true transfer, *ok_par of those with true rotation-only parallax >= tau_inf.
+// true transfer, *ok_par of those with true rotation-only parallax >= tau_inf;
+// *gain: the least-squares factor from the true flow to the decoded one over
+// the *ok vectors (1: unbiased; < 1: the vectors are short).
 void CountRoad(const slapse::AnchorPair& pair, const slapse::GroundTruth& gt,
-               const slapse::Rigid3d& truth, double min_parallax_px, int* n, int* ok, int* ok_par) {
+               const slapse::Rigid3d& truth, double min_parallax_px, int* n, int* ok, int* ok_par,
+               double* gain) {
   *n = *ok = *ok_par = 0;
+  double dot = 0.0, sq = 0.0;
   const Eigen::Matrix3d KRKinv = gt.intrinsics.K() * truth.R() * gt.intrinsics.K().inverse();
   for (const slapse::Correspondence& c : pair.correspondences) {
     if (gt.LabelAt(static_cast<int>(pair.later_index), c.x_later_px.x(), c.x_later_px.y()) != 0) {
@@ -89,8 +93,12 @@ void CountRoad(const slapse::AnchorPair& pair, const slapse::GroundTruth& gt,
     }
     if ((x - c.x_earlier_px).norm() > 1.0) continue;
     ++*ok;
+    const Eigen::Vector2d true_flow = c.x_later_px - x, flow = c.x_later_px - c.x_earlier_px;
+    dot += true_flow.dot(flow);
+    sq += true_flow.squaredNorm();
     if (slapse::RotationOnlyParallaxPx(KRKinv, c) >= min_parallax_px) ++*ok_par;
   }
+  *gain = sq > 0.0 ? dot / sq : 0.0;
 }
 
 void PrintPair(const slapse::AnchorPair& pair, const slapse::PairMotionReport& r,
@@ -98,19 +106,21 @@ void PrintPair(const slapse::AnchorPair& pair, const slapse::PairMotionReport& r
                const slapse::InfinityOptions& o) {
   const slapse::Intrinsics& k = gt.intrinsics;
   int true_in = 0, true_par = 0, road = 0, road_ok = 0, road_ok_par = 0;
+  double road_gain = 0.0;
   CountAgainstTruth(pair, k, truth, o.ransac_threshold_px, o.tau_inf_px, &true_in, &true_par);
-  CountRoad(pair, gt, truth, o.tau_inf_px, &road, &road_ok, &road_ok_par);
+  CountRoad(pair, gt, truth, o.tau_inf_px, &road, &road_ok, &road_ok_par, &road_gain);
   const double er = r.has_motion ? AngleDeg(r.later_from_earlier.R(), truth.R()) : -1;
   const double et =
       r.has_motion ? slapse::AngleBetweenDeg(r.later_from_earlier.translation, truth.translation)
                    : -1;
   std::printf(
       "  %lld-%lld n %zu motion %d e_in %d cheir %d rot_out %d par_in %d samp_in %d band %d | "
-      "true_in %d true_par %d road %d ok %d ok_par %d |t| %.2f | err rot %.3f dir %.2f\n",
+      "true_in %d true_par %d road %d ok %d ok_par %d gain %.3f |t| %.2f | err rot %.3f dir "
+      "%.2f\n",
       static_cast<long long>(pair.earlier_index), static_cast<long long>(pair.later_index),
       pair.correspondences.size(), r.has_motion ? 1 : 0, r.num_e_inliers, r.num_cheirality_inliers,
       r.num_rotation_outliers, r.num_parallax_inliers, r.num_parallax_sampson_inliers,
-      r.num_parallax_control_band, true_in, true_par, road, road_ok, road_ok_par,
+      r.num_parallax_control_band, true_in, true_par, road, road_ok, road_ok_par, road_gain,
       truth.translation.norm(), er, et);
 }
 
