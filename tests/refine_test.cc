@@ -192,8 +192,8 @@ TEST(WindowRefinerTest, ScaleHoldsThroughAPlaneTurnover) {
   EXPECT_LT(WorstNewestStepError(right_only, 16, 8, 1.3, 0.1, o), 0.03);
   // Without the motion prior nothing ties the new planes' scale to the old
   // steps: the jump stays (so the bound above is the prior's doing).
-  o.speed_change_rel_per_s = 1e3;
-  o.angular_accel_rad_s2 = 1e3;
+  o.speed_change_rel_per_sqrt_s = 1e3;
+  o.angular_rate_change_rad_s_per_sqrt_s = 1e3;
   EXPECT_GT(WorstNewestStepError(right_only, 16, 8, 1.3, 0.1, o), 0.2);
 }
 

@@ -91,6 +91,14 @@ int RunEvalTrajectory(int argc, char** argv) {
                  "track pairs with motion but no plane (PipelineOptions::motion_only_steps)")
       ->type_name("BOOL")
       ->capture_default_str();
+  app.add_option("--window-refine", eo.pipeline.window_refine,
+                 "sliding-window refinement of poses and planes (PipelineOptions::window_refine)")
+      ->type_name("BOOL")
+      ->capture_default_str();
+  app.add_option("--refine-window", eo.pipeline.refine.window_anchors,
+                 "anchors in the refinement window (WindowRefinerOptions::window_anchors)")
+      ->type_name("N")
+      ->capture_default_str();
   if (int rc = cl.Parse(argc, argv); rc >= 0) return rc;
   if (!cl.positional().empty()) {
     return Fail("eval-trajectory", "unexpected argument '" + cl.positional()[0] + "'", 2);

@@ -71,6 +71,8 @@ struct PlaneBlockResidual {
 //   v_1 = R_a^T (c_b - c_a) / dt_1,  v_2 = R_b^T (c_c - c_b) / dt_2   (body frame)
 //   w_1 = Log(R_a^T R_b) / dt_1,     w_2 = Log(R_b^T R_c) / dt_2
 //   r = [(v_2 - v_1) / s_v; (w_2 - w_1) / s_w]
+// with s_v = q_v |v_1| sqrt(dt), s_w = q_w sqrt(dt), dt = (dt_1 + dt_2) / 2:
+// a random walk of the velocities, like the EKF's process noise.
 struct MotionPriorResidual {
   MotionPriorResidual(double dt1, double dt2, double sigma_v, double sigma_w)
       : dt1(dt1), dt2(dt2), inv_sv(1.0 / sigma_v), inv_sw(1.0 / sigma_w) {}
@@ -141,7 +143,7 @@ struct PoseBlock {
 Status WindowRefinerOptions::Check(const std::string& who) const {
   if (window_anchors < 3 || max_iterations < 1 || max_mbs_per_plane < 4 || !(extra_sigma_px > 0) ||
       !(huber_k > 0) || !(gauge_step_rel_sigma > 0) || !(road_height_rel_sigma > 0) ||
-      !(speed_change_rel_per_s > 0) || !(angular_accel_rad_s2 > 0)) {
+      !(speed_change_rel_per_sqrt_s > 0) || !(angular_rate_change_rad_s_per_sqrt_s > 0)) {
     return InvalidArgumentError(who +
                                 ": window_anchors must be >= 3, max_iterations >= 1, "
                                 "max_mbs_per_plane >= 4 and every sigma > 0");
@@ -414,12 +416,14 @@ void WindowRefiner::AddGaugeAndPriors(Problem* problem, size_t first, WindowRefi
     const double speed =
         std::max((wp.poses[k - 1].c - wp.poses[k - 2].c).norm() / dt1, 1e-3 * max_speed);
     if (!(speed > 0)) continue;
-    const double dt = 0.5 * (dt1 + dt2);
+    // Random walk of the velocities between the steps' midpoints, dt apart.
+    const double sqrt_dt = std::sqrt(0.5 * (dt1 + dt2));
     PoseBlock &a = wp.poses[k - 2], &b = wp.poses[k - 1], &c = wp.poses[k];
     wp.problem.AddResidualBlock(
         new ceres::AutoDiffCostFunction<MotionPriorResidual, 6, 4, 3, 4, 3, 4, 3>(
-            new MotionPriorResidual(dt1, dt2, options_.speed_change_rel_per_s * speed * dt,
-                                    options_.angular_accel_rad_s2 * dt)),
+            new MotionPriorResidual(dt1, dt2,
+                                    options_.speed_change_rel_per_sqrt_s * speed * sqrt_dt,
+                                    options_.angular_rate_change_rad_s_per_sqrt_s * sqrt_dt)),
         nullptr, a.q.coeffs().data(), a.c.data(), b.q.coeffs().data(), b.c.data(),
         c.q.coeffs().data(), c.c.data());
   }

@@ -32,8 +32,9 @@
 //      a prior at its previous estimate (or the metric camera height) with
 //      road_height_rel_sigma;
 //  (d) the motion prior: consecutive steps' velocities (t / dt, in the body
-//      frame) and angular velocities differ by a car's acceleration, so a
-//      step that sees only new planes cannot take a new scale in one step.
+//      frame) and angular velocities differ by a random walk (sigma ~
+//      sqrt(dt)), so a step that sees only new planes cannot take a new
+//      scale in one step.
 // Cost: Levenberg-Marquardt (Ceres, dense Schur on the few poses), at most
 // max_iterations; macroblocks per (pair, plane) are subsampled to
 // max_mbs_per_plane, so a solve's cost is bounded by the window size.
@@ -63,10 +64,15 @@ struct WindowRefinerOptions {
   double huber_k = 2.0;                 // Huber threshold, normalised residual units
   double gauge_step_rel_sigma = 0.002;  // (a): oldest step's length, relative
   double road_height_rel_sigma = 0.01;  // (c): road distance, relative
-  // (d): velocity change per second relative to the speed (0.3: 3 m/s^2 at
-  // 10 m/s) and angular-velocity change, rad/s per second.
-  double speed_change_rel_per_s = 0.3;
-  double angular_accel_rad_s2 = 0.5;
+  // (d): the velocities' random walk, as in the EKF's process model: over
+  // dt seconds the body-frame velocity changes by speed_change_rel_per_sqrt_s
+  // * sqrt(dt) relative to the speed (0.15: 5.5 % over one 30 fps IBBBP
+  // anchor step of 0.133 s, 15 % over a second) and the angular velocity by
+  // angular_rate_change_rad_s_per_sqrt_s * sqrt(dt) rad/s. The spread over a
+  // given time does not depend on the anchor rate (docs/METHOD.md "The
+  // refiner's motion prior and the anchor rate").
+  double speed_change_rel_per_sqrt_s = 0.15;
+  double angular_rate_change_rad_s_per_sqrt_s = 0.5;
   // A plane id whose guess (the filter's plane) differs from the window's
   // plane by more than this angle or distance ratio is a different surface
   // under the same id (see Push).
