@@ -86,7 +86,7 @@ void ExpectTracksWithoutPlanes(SceneKind kind, int max_untracked_pairs) {
   EXPECT_EQ(without.motion_only_anchors, 0);
 }
 
-// Today (docs/TRAJECTORY.md): urban ATE 1.1 %, eps_D 5.6 %; avenue 0.4 %, 3.1 %.
+// Today (docs/TRAJECTORY.md): urban ATE 1.5 %, eps_D 8.0 %; avenue 0.4 %, 1.2 %.
 TEST(SceneKindsEndToEndTest, Urban) {
   ExpectTracks(RunSmallDrive(SceneKind::kUrban, 2), 0.05, 0.12);
 }
