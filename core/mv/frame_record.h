@@ -89,9 +89,10 @@ struct StreamInfo {
   //    num_ref_frames; 1 for MPEG).
   bool b_pyramid = false;
   int max_ref_frames = 1;
-  // Interlaced MPEG-2 (docs/METHOD.md, "MV reader"): some frame was coded as
-  // interlaced (progressive_frame = 0). Its field-predicted vectors are
-  // dropped (ReadStats::field_mvs_dropped); field pictures are re-encoded.
+  // Some frame was coded as interlaced (AVFrame.interlaced_frame; MPEG-2:
+  // progressive_frame = 0). For MPEG-2 (docs/METHOD.md, "Interlaced MPEG-2")
+  // field-predicted vectors are dropped (ReadStats::field_mvs_dropped) and
+  // field pictures re-encoded; other codecs' interlaced coding is not handled.
   bool interlaced = false;
   // MPEG-2 field pictures (each field coded as a picture of its own) were
   // seen; FFmpeg exports their vectors without their reference field, so the
