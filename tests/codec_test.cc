@@ -381,6 +381,15 @@ TEST(PresetTest, NamesParseAndUnknownNamesListTheChoices) {
   ASSERT_TRUE(h.ok());
   EXPECT_TRUE(h->h264_b_pyramid);
   EXPECT_EQ(h->h264_refs, 3);
+  auto il = EncoderPreset("mpeg2-interlaced", 25.0);
+  ASSERT_TRUE(il.ok());
+  EXPECT_TRUE(il->interlaced);
+  EXPECT_EQ(il->codec, VideoCodec::kMpeg2);
+  EXPECT_EQ(il->b_frames, 3);
+  EncoderOptions h264_interlaced = *il;
+  h264_interlaced.codec = VideoCodec::kH264;
+  auto refused = VideoEncoder::Open(MakeTempDir("interlaced") + "/x.ts", 320, 240, h264_interlaced);
+  EXPECT_EQ(refused.status().code(), StatusCode::kInvalidArgument);
   auto bad = EncoderPreset("h264-fancy", 25.0);
   EXPECT_EQ(bad.status().code(), StatusCode::kInvalidArgument);
   EXPECT_NE(bad.status().message().find("h264-high-bpyr-3ref"), std::string::npos);

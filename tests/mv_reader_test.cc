@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <string>
 #include <vector>
 
@@ -356,6 +357,122 @@ std::string EncodeWithCli(const std::string& codec_args, const std::string& name
       codec_args + " -y " + path;
   EXPECT_EQ(testing::RunCommand(cmd), 0) << cmd;
   return path;
+}
+
+// Interlaced MPEG-2 (docs/METHOD.md, "MV reader"). An interlaced camera's pan
+// (each frame's bottom field half a frame after its top field) coded by
+// libavcodec as interlaced frame pictures, field or frame prediction per
+// macroblock (+ilme+ildct, top field first). FFmpeg exports a field-predicted
+// macroblock as two 16x8 blocks without their reference field; the reader
+// drops them and keeps the frame-predicted 16x16 ones, whose displacement is
+// the frame's over the anchors' distance.
+constexpr double kInterlacedVy = 3.0;  // px per frame: fields 1.5 px apart
+
+TEST(InterlacedMpeg2Test, FieldPredictedVectorsAreDroppedFrameVectorsAreTheFramesMotion) {
+  const std::string path = MakeTempDir("interlaced") + "/pan.ts";
+  auto eo = EncoderPreset("mpeg2-interlaced", 30.0);
+  ASSERT_TRUE(eo.ok());
+  eo->quality = 3;
+  ASSERT_TRUE(WritePan(path, *eo, kFrames, kVx, kInterlacedVy).ok());
+
+  auto reader = MvReader::Open(path);
+  ASSERT_TRUE(reader.ok()) << reader.status().ToString();
+  Status end;
+  const std::vector<FrameRecord> frames = ReadAll(reader->get(), &end);
+  EXPECT_EQ(end.code(), StatusCode::kOutOfRange) << end.ToString();
+  ASSERT_EQ(static_cast<int>(frames.size()), kFrames);
+  const StreamInfo& info = (*reader)->info();
+  const ReadStats& stats = (*reader)->stats();
+  EXPECT_TRUE(info.interlaced);
+  EXPECT_FALSE(info.field_pictures);
+  EXPECT_TRUE(info.reencoded_from.empty());
+  EXPECT_EQ(info.max_consecutive_b, 3);
+  // The encoder predicts some macroblocks by field: their vectors are dropped, said once.
+  EXPECT_GT(stats.field_mvs_dropped, 50);
+  ASSERT_FALSE(stats.notes.empty());
+  EXPECT_NE(stats.notes[0].find("field-predicted vectors are dropped"), std::string::npos)
+      << stats.notes[0];
+  // 240 rows are 7.5 field macroblock rows: the padded 16th macroblock row,
+  // wholly below the picture, has vectors too; they are dropped.
+  EXPECT_GT(stats.outside_mvs_dropped, 0);
+
+  int64_t kept = 0, exact = 0, within_1px = 0;
+  for (const FrameRecord& f : frames) {
+    for (const MotionVector& mv : f.mvs) {
+      ASSERT_EQ(mv.h_px, 16) << "frame " << f.index;
+      ASSERT_LT(mv.y_px, 240.0f);
+      if (mv.x_px < 40 || mv.x_px > 280 || mv.y_px < 40 || mv.y_px > 200) continue;
+      const double gap = mv.direction == RefDirection::kPast
+                             ? -static_cast<double>(f.index - f.prev_anchor_index)
+                             : static_cast<double>(f.next_anchor_index - f.index);
+      const double err = std::hypot(mv.dx_px - gap * kVx, mv.dy_px - gap * kInterlacedVy);
+      ++kept;
+      exact += err <= 0.5 + 1e-6;
+      within_1px += err <= 1.0 + 1e-6;
+    }
+  }
+  ASSERT_GT(kept, 2000);
+  // Measured: 2991 kept, 82.0 % within 0.5 px, 98.5 % within 1 px; 8838
+  // field-predicted vectors (4419 macroblocks) and 822 outside dropped.
+  EXPECT_GE(within_1px, 0.95 * kept) << within_1px << " of " << kept;
+  EXPECT_GE(exact, 0.75 * kept) << exact << " of " << kept;
+  std::printf(
+      "interlaced pan: %lld vectors kept, %.1f %% within 0.5 px, %.1f %% within 1 px; "
+      "%lld field-predicted and %lld outside dropped\n",
+      static_cast<long long>(kept), 100.0 * exact / kept, 100.0 * within_1px / kept,
+      static_cast<long long>(stats.field_mvs_dropped),
+      static_cast<long long>(stats.outside_mvs_dropped));
+}
+
+// Field pictures (each field its own picture): FFmpeg exports their vectors
+// on a frame's macroblock grid with the two fields' rows interleaved, in field
+// lines and without their reference field. The reader re-encodes such a stream
+// (by default) or refuses it. The stream is spliced from libavcodec's
+// intra-coded fields (WriteMpeg2IntraFieldPictures): what FFmpeg decodes as
+// field pictures.
+TEST(InterlacedMpeg2Test, FieldPicturesAreReencodedOrRefused) {
+  const std::string path = MakeTempDir("fields") + "/fields.m2v";
+  constexpr int kFieldFrames = 13;
+  ASSERT_TRUE(testing::WriteMpeg2IntraFieldPictures(path, kFieldFrames, kVx, kInterlacedVy).ok());
+  {
+    auto reader = MvReader::Open(path);
+    ASSERT_TRUE(reader.ok()) << reader.status().ToString();
+    Status end;
+    const std::vector<FrameRecord> frames = ReadAll(reader->get(), &end);
+    EXPECT_EQ(end.code(), StatusCode::kOutOfRange) << end.ToString();
+    EXPECT_EQ(static_cast<int>(frames.size()), kFieldFrames);
+    const StreamInfo& info = (*reader)->info();
+    EXPECT_TRUE(info.field_pictures);
+    EXPECT_TRUE(info.interlaced);
+    EXPECT_EQ(info.reencoded_from, "mpeg2video");
+    EXPECT_EQ(info.width_px, 320);
+    EXPECT_EQ(info.height_px, 256);
+    ASSERT_FALSE((*reader)->stats().notes.empty());
+    EXPECT_NE((*reader)->stats().notes[0].find("field pictures"), std::string::npos);
+    // The re-encoder's vectors: the pan's motion between the woven frames.
+    std::vector<double> p_dx, p_dy;
+    for (const FrameRecord& f : frames) {
+      if (f.type != PictureType::kP) continue;
+      const double gap = static_cast<double>(f.index - f.prev_anchor_index);
+      for (const MotionVector& mv : f.mvs) {
+        if (mv.x_px < 40 || mv.x_px > 280 || mv.y_px < 40 || mv.y_px > 216) continue;
+        p_dx.push_back(mv.dx_px / gap);
+        p_dy.push_back(mv.dy_px / gap);
+      }
+    }
+    ASSERT_GE(p_dx.size(), 100u);
+    EXPECT_NEAR(Median(p_dx), -kVx, 0.25);
+    EXPECT_NEAR(Median(p_dy), -kInterlacedVy, 0.25);
+  }
+  MvReaderOptions off;
+  off.reencode = false;
+  auto reader = MvReader::Open(path, off);
+  ASSERT_TRUE(reader.ok()) << "field pictures are seen in the first packet, not at opening";
+  FrameRecord f;
+  const Status s = (*reader)->Next(&f);
+  EXPECT_EQ(s.code(), StatusCode::kFailedPrecondition) << s.ToString();
+  EXPECT_NE(s.message().find("field pictures"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("re-encoding is off"), std::string::npos) << s.message();
 }
 
 class NoMvCodecTest : public ::testing::TestWithParam<std::pair<const char*, const char*>> {};

@@ -52,21 +52,148 @@ cv::Mat NoiseTexture(int width_px, int height_px, uint64_t seed) {
   return out;
 }
 
+namespace {
+
+// Frame `i` of a pan over `tex` (WritePan): the point q of the texture sits at
+// q - margin + t * v, t = i (+ 0.5 for the odd rows of an interlaced camera).
+cv::Mat PanFrame(const cv::Mat& tex, int margin, int i, double vx_px, double vy_px, int width_px,
+                 int height_px, bool interlaced) {
+  auto render = [&](double t) {
+    const cv::Matx23d src_from_dst(1, 0, margin - t * vx_px, 0, 1, margin - t * vy_px);
+    cv::Mat frame;
+    cv::warpAffine(tex, frame, src_from_dst, cv::Size(width_px, height_px),
+                   cv::INTER_CUBIC | cv::WARP_INVERSE_MAP);
+    return frame;
+  };
+  cv::Mat frame = render(i);
+  if (interlaced) {
+    const cv::Mat bottom = render(i + 0.5);
+    for (int r = 1; r < height_px; r += 2) bottom.row(r).copyTo(frame.row(r));
+  }
+  return frame;
+}
+
+// Texture beyond the frame for the whole pan (half a frame more when interlaced).
+int PanMargin(int frames, double vx_px, double vy_px, bool interlaced) {
+  const double span = frames + (interlaced ? 0.5 : 0.0);
+  return static_cast<int>(std::ceil(span * (std::abs(vx_px) + std::abs(vy_px)))) + 8;
+}
+
+// An elementary stream's start-code units (each from its 00 00 01 to the next).
+std::vector<std::string> StartCodeUnits(const std::string& es) {
+  std::vector<size_t> starts;
+  for (size_t i = 0; i + 3 < es.size(); ++i) {
+    if (es[i] == 0 && es[i + 1] == 0 && es[i + 2] == 1) starts.push_back(i);
+  }
+  std::vector<std::string> units;
+  for (size_t k = 0; k < starts.size(); ++k) {
+    const size_t end = k + 1 < starts.size() ? starts[k + 1] : es.size();
+    units.push_back(es.substr(starts[k], end - starts[k]));
+  }
+  return units;
+}
+
+uint8_t UnitCode(const std::string& u) { return static_cast<uint8_t>(u[3]); }
+int ExtensionId(const std::string& u) { return static_cast<uint8_t>(u[4]) >> 4; }
+// A picture's own units after its header: its picture coding extension (id 8) and slices.
+bool InPicture(const std::string& u) {
+  const uint8_t c = UnitCode(u);
+  return (c >= 0x01 && c <= 0xAF) || (c == 0xB5 && ExtensionId(u) == 8);
+}
+
+// The pictures of an elementary stream: header, coding extension, slices.
+std::vector<std::string> Pictures(const std::vector<std::string>& units) {
+  std::vector<std::string> pictures;
+  for (const std::string& u : units) {
+    if (UnitCode(u) == 0x00) {
+      pictures.push_back(u);
+    } else if (!pictures.empty() && InPicture(u)) {
+      pictures.back() += u;
+    }
+  }
+  return pictures;
+}
+
+// A field picture from a progressive picture's units: the coding extension's
+// picture_structure (1 top, 2 bottom); top_field_first, frame_pred_frame_dct,
+// chroma_420_type and progressive_frame 0 (a field picture's values).
+std::string AsFieldPicture(std::string picture, int structure) {
+  for (size_t i = 0; i + 8 < picture.size(); ++i) {
+    if (picture[i] != 0 || picture[i + 1] != 0 || picture[i + 2] != 1 ||
+        static_cast<uint8_t>(picture[i + 3]) != 0xB5 ||
+        (static_cast<uint8_t>(picture[i + 4]) >> 4) != 8) {
+      continue;
+    }
+    picture[i + 6] = static_cast<char>((picture[i + 6] & 0xFC) | structure);
+    picture[i + 7] = static_cast<char>(picture[i + 7] & ~0xC1);
+    picture[i + 8] = static_cast<char>(picture[i + 8] & ~0x80);
+    break;
+  }
+  return picture;
+}
+
+}  // namespace
+
 Status WritePan(const std::string& path, const EncoderOptions& options, int frames, double vx_px,
                 double vy_px, int width_px, int height_px) {
-  const int margin = static_cast<int>(std::ceil(frames * (std::abs(vx_px) + std::abs(vy_px)))) + 8;
+  const int margin = PanMargin(frames, vx_px, vy_px, options.interlaced);
   const cv::Mat tex = NoiseTexture(width_px + 2 * margin, height_px + 2 * margin, 7);
   auto enc = VideoEncoder::Open(path, width_px, height_px, options);
   if (!enc.ok()) return enc.status();
-  cv::Mat frame;
   for (int i = 0; i < frames; ++i) {
-    // Frame i shows texture point q at q - margin + i * v: sample at x + margin - i * v.
-    const cv::Matx23d src_from_dst(1, 0, margin - i * vx_px, 0, 1, margin - i * vy_px);
-    cv::warpAffine(tex, frame, src_from_dst, cv::Size(width_px, height_px),
-                   cv::INTER_CUBIC | cv::WARP_INVERSE_MAP);
-    SLAPSE_RETURN_IF_ERROR((*enc)->Write(frame));
+    SLAPSE_RETURN_IF_ERROR((*enc)->Write(
+        PanFrame(tex, margin, i, vx_px, vy_px, width_px, height_px, options.interlaced)));
   }
   return (*enc)->Finish();
+}
+
+Status WriteMpeg2IntraFieldPictures(const std::string& path, int frames, double vx_px, double vy_px,
+                                    int width_px, int height_px) {
+  if (height_px % 32 != 0) return InvalidArgumentError("field pictures need a height of 32 n");
+  const int margin = PanMargin(frames, vx_px, vy_px, true);
+  const cv::Mat tex = NoiseTexture(width_px + 2 * margin, height_px + 2 * margin, 7);
+  EncoderOptions intra;
+  intra.b_frames = 0;
+  intra.gop_size = 1;
+  const std::string dir = MakeTempDir("fields");
+  std::string es[2];
+  for (int field = 0; field < 2; ++field) {
+    const std::string field_path = dir + "/field" + std::to_string(field) + ".m2v";
+    auto enc = VideoEncoder::Open(field_path, width_px, height_px / 2, intra);
+    if (!enc.ok()) return enc.status();
+    for (int i = 0; i < frames; ++i) {
+      const cv::Mat frame = PanFrame(tex, margin, i, vx_px, vy_px, width_px, height_px, true);
+      cv::Mat rows(height_px / 2, width_px, frame.type());
+      for (int r = 0; r < height_px / 2; ++r) frame.row(2 * r + field).copyTo(rows.row(r));
+      SLAPSE_RETURN_IF_ERROR((*enc)->Write(rows));
+    }
+    SLAPSE_RETURN_IF_ERROR((*enc)->Finish());
+    es[field] = ReadFileBytes(field_path);
+  }
+  const std::vector<std::string> top = StartCodeUnits(es[0]);
+  const std::vector<std::string> bottom = Pictures(StartCodeUnits(es[1]));
+  std::string out;
+  size_t next_bottom = 0;
+  for (size_t i = 0; i < top.size(); ++i) {
+    std::string u = top[i];
+    if (UnitCode(u) == 0xB3) {  // sequence header: vertical_size (12 bits at byte 5.5)
+      u[5] = static_cast<char>((u[5] & 0xF0) | ((height_px >> 8) & 0x0F));
+      u[6] = static_cast<char>(height_px & 0xFF);
+    } else if (UnitCode(u) == 0xB5 && ExtensionId(u) == 1) {
+      u[5] = static_cast<char>(u[5] & ~0x08);  // progressive_sequence = 0
+    } else if (UnitCode(u) == 0x00) {
+      std::string picture = u;
+      while (i + 1 < top.size() && InPicture(top[i + 1])) picture += top[++i];
+      if (next_bottom >= bottom.size()) return InternalError("fewer bottom than top fields");
+      out += AsFieldPicture(picture, 1) + AsFieldPicture(bottom[next_bottom++], 2);
+      continue;
+    } else if (InPicture(u)) {
+      continue;  // (not reached: a picture's units follow its header)
+    }
+    out += u;
+  }
+  WriteFileBytes(path, out);
+  return Status::Ok();
 }
 
 SimulateOptions SmallMpeg2DriveOptions(uint64_t seed, double duration_s) {

@@ -24,9 +24,22 @@ cv::Mat NoiseTexture(int width_px, int height_px, uint64_t seed);
 // Writes `frames` frames of a global pan: the content of frame i is the
 // texture moved by i * (vx_px, vy_px), i.e. a point at p in frame i sits at
 // p + (j - i) * v in frame j. The true MV of a block at c referring from frame
-// j to frame r is therefore (r - j) * v.
+// j to frame r is therefore (r - j) * v. With options.interlaced the camera
+// is interlaced: the odd rows (bottom field) of frame i show the pan at i + 0.5.
 Status WritePan(const std::string& path, const EncoderOptions& options, int frames, double vx_px,
                 double vy_px, int width_px = 320, int height_px = 240);
+
+// An MPEG-2 elementary stream (.m2v) of `frames` intra-coded frames of a pan
+// (as WritePan, interlaced) coded as field pictures: each frame a top field
+// picture and a bottom field picture. No encoder in Debian 12 writes field
+// pictures (mjpegtools' mpeg2enc crashes in its field mode), so the fields are
+// encoded by libavcodec's mpeg2video as intra-only progressive pictures of
+// half the height, and their pictures are spliced into one stream: intra
+// macroblocks have the same syntax in a field picture as in a progressive
+// frame picture; the sequence header gets the full height and
+// progressive_sequence = 0, each picture coding extension its field.
+Status WriteMpeg2IntraFieldPictures(const std::string& path, int frames, double vx_px, double vy_px,
+                                    int width_px = 320, int height_px = 256);
 
 // A simulated drive (lab/sim) on disk.
 struct TestDrive {

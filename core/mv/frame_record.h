@@ -89,6 +89,15 @@ struct StreamInfo {
   //    num_ref_frames; 1 for MPEG).
   bool b_pyramid = false;
   int max_ref_frames = 1;
+  // Some frame was coded as interlaced (AVFrame.interlaced_frame; MPEG-2:
+  // progressive_frame = 0). For MPEG-2 (docs/METHOD.md, "Interlaced MPEG-2")
+  // field-predicted vectors are dropped (ReadStats::field_mvs_dropped) and
+  // field pictures re-encoded; other codecs' interlaced coding is not handled.
+  bool interlaced = false;
+  // MPEG-2 field pictures (each field coded as a picture of its own) were
+  // seen; FFmpeg exports their vectors without their reference field, so the
+  // stream is re-encoded (reencoded_from "mpeg2video") or refused.
+  bool field_pictures = false;
   // The stream keeps more references than its anchors need (one for IPPP,
   // two with B frames, one more for a B-pyramid): a vector may point to an
   // older frame than the anchor the merger assumes.
@@ -104,6 +113,12 @@ struct ReadStats {
   int64_t packet_errors = 0;   // packets the decoder rejected
   int64_t corrupt_frames = 0;  // frames decoded with concealed errors
   std::string first_error;     // human-readable description of the first error
+  // Vectors not handed out because they cannot be read in frame pixels: an
+  // interlaced MPEG-2 frame's field-predicted vectors (their reference field
+  // is not exported), and vectors of macroblocks outside the picture (the
+  // padded row of an interlaced MPEG-2 frame whose height is not a multiple of 32).
+  int64_t field_mvs_dropped = 0;
+  int64_t outside_mvs_dropped = 0;
   // CPU seconds (the reading thread's clock): decoding the input, and
   // re-encoding plus decoding the re-encoded frames (0 when not re-encoded).
   double decode_cpu_s = 0.0;

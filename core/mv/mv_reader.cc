@@ -64,6 +64,17 @@ Status OpenError(const std::string& url, int err) {
   return UnavailableError(what);
 }
 
+// True if `data` holds an MPEG-2 picture coding extension (00 00 01 B5, id 8)
+// whose picture_structure is a field (1 top, 2 bottom; 3 is a frame picture).
+bool HasFieldPicture(const uint8_t* data, int size) {
+  for (int i = 0; i + 6 < size; ++i) {
+    if (data[i] != 0 || data[i + 1] != 0 || data[i + 2] != 1 || data[i + 3] != 0xB5) continue;
+    const int structure = data[i + 6] & 3;
+    if ((data[i + 4] >> 4) == 8 && (structure == 1 || structure == 2)) return true;
+  }
+  return false;
+}
+
 }  // namespace
 
 char PictureTypeChar(PictureType type) {
@@ -229,6 +240,52 @@ void MvReader::NoteError(const std::string& what) {
   if (stats_.first_error.empty()) stats_.first_error = what;
 }
 
+void MvReader::CollectVectors(const AVFrame* f, FrameRecord* rec) {
+  const AVFrameSideData* sd = av_frame_get_side_data(f, AV_FRAME_DATA_MOTION_VECTORS);
+  if (rec->type == PictureType::kB && !info_.b_frame_mvs) sd = nullptr;
+  if (sd == nullptr) return;
+  // In an MPEG-2 frame picture FFmpeg exports a field-predicted macroblock as
+  // two 16x8 blocks (top field's vector, bottom field's), vertical component
+  // doubled to frame lines but without the reference field: an opposite-parity
+  // reference is a line and half a frame interval away, which the vector does
+  // not say. Frame-predicted macroblocks are 16x16 (docs/METHOD.md, "MV reader").
+  const bool mpeg2 = info_.codec_name == "mpeg2video";
+  const auto* mvs = reinterpret_cast<const AVMotionVector*>(sd->data);
+  const size_t n = sd->size / sizeof(AVMotionVector);
+  rec->mvs.reserve(n);
+  for (size_t i = 0; i < n; ++i) {
+    const AVMotionVector& m = mvs[i];
+    if (m.motion_scale == 0) continue;
+    if (m.dst_y - m.h / 2 >= f->height || m.dst_x - m.w / 2 >= f->width) {
+      ++stats_.outside_mvs_dropped;  // a padded macroblock row, wholly outside the picture
+      continue;
+    }
+    if (mpeg2 && m.h == 8) {
+      if (stats_.field_mvs_dropped++ == 0) {
+        stats_.notes.push_back("frame " + std::to_string(rec->index) +
+                               ": interlaced MPEG-2 with field prediction; field-predicted "
+                               "vectors are dropped (FFmpeg does not export their reference "
+                               "field), frame-predicted ones are read");
+      }
+      continue;
+    }
+    MotionVector mv;
+    // FFmpeg's dst is the block centre with integer pixel edges; shift to pixel centres.
+    // After a resolution change with the aspect kept, positions and
+    // displacements are scaled to the first frame's grid (pixel centres:
+    // x0 + 0.5 = s (x + 0.5)), as the intrinsics scaled to this size would.
+    mv.x_px = static_cast<float>(scale_x_ * m.dst_x - 0.5);
+    mv.y_px = static_cast<float>(scale_y_ * m.dst_y - 0.5);
+    mv.dx_px = static_cast<float>(scale_x_ * m.motion_x / m.motion_scale);
+    mv.dy_px = static_cast<float>(scale_y_ * m.motion_y / m.motion_scale);
+    mv.w_px = m.w;
+    mv.h_px = m.h;
+    mv.direction = m.source > 0 ? RefDirection::kFuture : RefDirection::kPast;
+    if (m.motion_scale >= 4) info_.mv_precision_denom = std::max(info_.mv_precision_denom, 4);
+    rec->mvs.push_back(mv);
+  }
+}
+
 void MvReader::Collect(AVFrame* f) {
   FrameRecord rec;
   rec.index = stats_.frames++;
@@ -251,31 +308,8 @@ void MvReader::Collect(AVFrame* f) {
     NoteError(where);
   }
 
-  const AVFrameSideData* sd = av_frame_get_side_data(f, AV_FRAME_DATA_MOTION_VECTORS);
-  if (rec.type == PictureType::kB && !info_.b_frame_mvs) sd = nullptr;
-  if (sd != nullptr) {
-    const auto* mvs = reinterpret_cast<const AVMotionVector*>(sd->data);
-    const size_t n = sd->size / sizeof(AVMotionVector);
-    rec.mvs.reserve(n);
-    for (size_t i = 0; i < n; ++i) {
-      const AVMotionVector& m = mvs[i];
-      if (m.motion_scale == 0) continue;
-      MotionVector mv;
-      // FFmpeg's dst is the block centre with integer pixel edges; shift to pixel centres.
-      // After a resolution change with the aspect kept, positions and
-      // displacements are scaled to the first frame's grid (pixel centres:
-      // x0 + 0.5 = s (x + 0.5)), as the intrinsics scaled to this size would.
-      mv.x_px = static_cast<float>(scale_x_ * m.dst_x - 0.5);
-      mv.y_px = static_cast<float>(scale_y_ * m.dst_y - 0.5);
-      mv.dx_px = static_cast<float>(scale_x_ * m.motion_x / m.motion_scale);
-      mv.dy_px = static_cast<float>(scale_y_ * m.motion_y / m.motion_scale);
-      mv.w_px = m.w;
-      mv.h_px = m.h;
-      mv.direction = m.source > 0 ? RefDirection::kFuture : RefDirection::kPast;
-      if (m.motion_scale >= 4) info_.mv_precision_denom = std::max(info_.mv_precision_denom, 4);
-      rec.mvs.push_back(mv);
-    }
-  }
+  if (f->interlaced_frame) info_.interlaced = true;
+  CollectVectors(f, &rec);
 
   // (Not after a resolution change: the plane would not be the stream's size.)
   if (options_.keep_luma && f->data[0] != nullptr && f->width == base_width_px_ &&
@@ -323,6 +357,40 @@ void MvReader::Collect(AVFrame* f) {
   consecutive_b_ = 0;
   last_anchor_index_ = rec.index;
   ready_.push_back(std::move(rec));
+}
+
+Status MvReader::StartReencoding(const std::string& why) {
+  SLAPSE_RETURN_IF_ERROR(options_.reencode_options.Check());
+  info_.reencoded_from = info_.codec_name;
+  info_.codec_name = kReencodeCodec;
+  info_.mv_precision_denom = 2;
+  info_.b_frame_mvs = true;
+  stats_.notes.push_back(why);
+  return Status::Ok();
+}
+
+void MvReader::CheckPictureStructure(const AVPacket* packet) {
+  if (info_.field_pictures || info_.codec_name != "mpeg2video" || !info_.reencoded_from.empty() ||
+      !HasFieldPicture(packet->data, packet->size)) {
+    return;
+  }
+  info_.field_pictures = true;
+  info_.interlaced = true;
+  const std::string what =
+      "MPEG-2 field pictures (each field coded as a picture of its own): FFmpeg exports their "
+      "vectors without the field they refer to, so they cannot be read in frame pixels";
+  if (stats_.frames > 0) {
+    return Fail(FailedPreconditionError(
+        what + "; they begin after " + std::to_string(stats_.frames) +
+        " frames read from frame pictures, and the stream ends there (the poses so far are kept)"));
+  }
+  if (!options_.reencode) {
+    return Fail(FailedPreconditionError(what + ", and re-encoding is off (turn it on to read "
+                                               "such a stream through the re-encoder)"));
+  }
+  if (Status s = StartReencoding(what + "; the stream is re-encoded for its vectors"); !s.ok()) {
+    Fail(s);
+  }
 }
 
 void MvReader::Fail(Status status) {
@@ -498,6 +566,11 @@ Status MvReader::Pump() {
     }
     if (pkt_->stream_index == stream_index_) {
       ++stats_.packets;
+      CheckPictureStructure(pkt_);
+      if (decoder_done_) {  // refused (field pictures)
+        av_packet_unref(pkt_);
+        break;
+      }
       if ((pkt_->flags & AV_PKT_FLAG_CORRUPT) != 0) {
         NoteError("packet " + std::to_string(stats_.packets) + " is marked corrupt by the demuxer");
         ++stats_.packet_errors;

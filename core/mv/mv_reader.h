@@ -122,6 +122,13 @@ class MvReader {
   // when the frame must be dropped.
   bool CheckFrameSize(const AVFrame* frame);
   void Fail(Status status);
+  // An MPEG-2 packet: looks for field pictures (StreamInfo::field_pictures)
+  // and re-encodes the stream from its first frame on, or refuses it.
+  void CheckPictureStructure(const AVPacket* packet);
+  // Reads the input through the re-encoder from here on (Take); `why` for the notes.
+  Status StartReencoding(const std::string& why);
+  // The vectors of one decoded frame, in slapse's convention, into `rec`.
+  void CollectVectors(const AVFrame* frame, FrameRecord* rec);
   void NoteError(const std::string& what);
   Status EndStatus() const;
 

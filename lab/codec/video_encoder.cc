@@ -75,7 +75,7 @@ constexpr char kBaselinePrefix[] = "h264-baseline-ippp-";
 }  // namespace
 
 std::vector<std::string> EncoderPresetNames() {
-  std::vector<std::string> names = {"mpeg2-ibbbp", "mpeg4-ibbbp", "h264-ippp"};
+  std::vector<std::string> names = {"mpeg2-ibbbp", "mpeg2-interlaced", "mpeg4-ibbbp", "h264-ippp"};
   for (int s : kPresetGopSecondsChoices) {
     names.push_back(kBaselinePrefix + std::to_string(s) + "s");
   }
@@ -95,6 +95,10 @@ StatusOr<EncoderOptions> EncoderPreset(const std::string& name, double fps) {
   if (name == "mpeg2-ibbbp" || name == "mpeg4-ibbbp") {
     o.codec = name == "mpeg2-ibbbp" ? VideoCodec::kMpeg2 : VideoCodec::kMpeg4;
     return o;  // IBBBP, GOP 12, quantiser 4: EncoderOptions{}
+  }
+  if (name == "mpeg2-interlaced") {
+    o.interlaced = true;
+    return o;
   }
   o.quality = 20;  // CRF for x264 / x265 / VP9; MJPEG's quantiser is set below
   if (name == "h264-ippp") {
@@ -161,7 +165,10 @@ StatusOr<std::unique_ptr<VideoEncoder>> VideoEncoder::Open(const std::string& pa
   if (o.fps <= 0) return InvalidArgumentError("fps must be positive");
   if (o.b_frames < 0 || o.b_frames > 16) return InvalidArgumentError("b_frames must be 0..16");
   if (o.gop_size < 1) return InvalidArgumentError("gop_size must be >= 1");
-
+  if (o.interlaced && o.codec != VideoCodec::kMpeg2) {
+    return InvalidArgumentError(std::string("interlaced encoding is MPEG-2 only, not ") +
+                                VideoCodecName(o.codec));
+  }
   std::unique_ptr<VideoEncoder> e(new VideoEncoder());
   e->path_ = path;
   int err = avformat_alloc_output_context2(&e->mux_, nullptr, nullptr, path.c_str());
@@ -227,6 +234,10 @@ StatusOr<std::unique_ptr<VideoEncoder>> VideoEncoder::Open(const std::string& pa
     av_dict_set(&opts, "dia_size", "4", 0);
     av_dict_set(&opts, "last_pred", "3", 0);
     if (o.codec == VideoCodec::kMpeg4 && o.mpeg4_qpel) c->flags |= AV_CODEC_FLAG_QPEL;
+    if (o.interlaced) {
+      c->flags |= AV_CODEC_FLAG_INTERLACED_ME | AV_CODEC_FLAG_INTERLACED_DCT;
+      c->field_order = AV_FIELD_TT;
+    }
     if (o.codec == VideoCodec::kMjpeg) c->max_b_frames = 0;
   }
   err = avcodec_open2(c, codec, &opts);
@@ -272,6 +283,9 @@ Status VideoEncoder::Write(const cv::Mat& bgr) {
   const int stride[1] = {static_cast<int>(bgr.step[0])};
   sws_scale(sws_, src, stride, 0, bgr.rows, yuv_->data, yuv_->linesize);
   yuv_->pts = frames_++;
+  // Interlaced: each frame's top field first (mpeg2video reads the order per frame).
+  yuv_->interlaced_frame = (enc_->flags & AV_CODEC_FLAG_INTERLACED_ME) != 0;
+  yuv_->top_field_first = yuv_->interlaced_frame;
   if (enc_->flags & AV_CODEC_FLAG_QSCALE) yuv_->quality = enc_->global_quality;
   err = avcodec_send_frame(enc_, yuv_);
   if (err < 0) return InternalError("encoding failed: " + AvErr(err));

@@ -44,10 +44,19 @@ struct EncoderOptions {
   int h264_refs = 1;
   // H.264 only: profile ("baseline", "main", "high"); empty = x264's choice.
   std::string h264_profile;
+  // MPEG-2 only: an interlaced camera's stream. Interlaced frame pictures,
+  // top field first, each macroblock predicted and transformed by frame or by
+  // field as the encoder finds cheaper (libavcodec's +ilme+ildct). The
+  // simulator then renders each frame's bottom field half a frame after its
+  // top field (lab/sim/simulate.h).
+  bool interlaced = false;
 };
 
 // Camera-like encoder settings by name (issue 13; `slapse simulate --preset`):
 //   mpeg2-ibbbp              MPEG-2, IBBBP, GOP 12, quantiser 4 (the paper's stream)
+//   mpeg2-interlaced         the same as an interlaced camera codes it: interlaced
+//                            frame pictures, top field first, field or frame
+//                            prediction per macroblock (EncoderOptions::interlaced)
 //   mpeg4-ibbbp              MPEG-4 Part 2, IBBBP, GOP 12, quantiser 4
 //   h264-ippp                H.264 IPPP, GOP 12, CRF 20 (the simulator's old --gop IPPP)
 //   h264-baseline-ippp-Ns    H.264 Baseline IPPP, one reference, an I frame every N s

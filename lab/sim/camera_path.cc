@@ -96,43 +96,57 @@ StatusOr<CameraPath> GenerateCameraPath(const Scene& scene, const PathOptions& o
   auto ds_dt = [&](double t, double s) {
     return (v_mid + speed(t)) / (1.0 - cl.Curvature(s) * lane);
   };
-  double s = o.start_s_m;
   const double dt = 1.0 / o.fps;
   const int substeps = 16;
   const double h = dt / substeps;
-  const double w = o.heading_smoothing_m;
-  Eigen::Vector3d prev_pos = Eigen::Vector3d::Zero();
-  for (int i = 0; i < o.num_frames; ++i) {
-    const double t = i * dt;
-    if (i > 0) {
-      for (int k = 0; k < substeps; ++k) {  // RK4
-        const double tk = (i - 1) * dt + k * h;
-        const double k1 = ds_dt(tk, s);
-        const double k2 = ds_dt(tk + 0.5 * h, s + 0.5 * h * k1);
-        const double k3 = ds_dt(tk + 0.5 * h, s + 0.5 * h * k2);
-        const double k4 = ds_dt(tk + h, s + h * k3);
-        s += h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4);
-      }
+  // `steps` RK4 substeps of ds/dt from (t0, s).
+  auto advance = [&](double t0, double s, int steps) {
+    for (int k = 0; k < steps; ++k) {
+      const double tk = t0 + k * h;
+      const double k1 = ds_dt(tk, s);
+      const double k2 = ds_dt(tk + 0.5 * h, s + 0.5 * h * k1);
+      const double k3 = ds_dt(tk + 0.5 * h, s + 0.5 * h * k2);
+      const double k4 = ds_dt(tk + h, s + h * k3);
+      s += h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4);
     }
+    return s;
+  };
+  const double w = o.heading_smoothing_m;
+  // The camera at time t and arc length s.
+  auto pose_at = [&](double t, double s) {
     const Eigen::Vector2d p = cl.Offset(s, lane);
     const Eigen::Vector3d pos(p.x(), p.y(), path.camera_height_m);
     const double heading = (cl.HeadingIntegral(s + w) - cl.HeadingIntegral(s - w)) / (2.0 * w);
     const Eigen::Matrix3d r =
         WorldFromCamRotation(heading, path.pitch_down_deg * kDeg + pitch_vib(t), roll_vib(t));
+    return Rigid3d(Eigen::Quaterniond(r).normalized(), pos);
+  };
+  double s = o.start_s_m;
+  Eigen::Vector3d prev_pos = Eigen::Vector3d::Zero();
+  for (int i = 0; i < o.num_frames; ++i) {
+    const double t = i * dt;
+    if (i > 0) s = advance((i - 1) * dt, s, substeps);
+    Rigid3d pose = pose_at(t, s);
     if (scene.road.s_end_m > 0.0 && s > scene.road.s_end_m - 50.0) {
       return OutOfRangeError("the street (" + std::to_string(scene.road.s_end_m) +
                              " m) is too short for the path: frame " + std::to_string(i) +
                              " reaches s = " + std::to_string(s) + " m");
     }
     // Keep consecutive quaternions in the same hemisphere (q and -q are the same rotation).
-    Eigen::Quaterniond q = Eigen::Quaterniond(r).normalized();
-    if (i > 0 && q.dot(path.world_from_cam.back().rotation) < 0) q.coeffs() *= -1.0;
+    if (i > 0 && pose.rotation.dot(path.world_from_cam.back().rotation) < 0) {
+      pose.rotation.coeffs() *= -1.0;
+    }
+    if (o.half_frame_poses) {
+      Rigid3d half = pose_at(t + 0.5 * dt, advance(t, s, substeps / 2));
+      if (half.rotation.dot(pose.rotation) < 0) half.rotation.coeffs() *= -1.0;
+      path.half_frame_world_from_cam.push_back(half);
+    }
     path.timestamps_s.push_back(t);
-    path.world_from_cam.emplace_back(q, pos);
+    path.world_from_cam.push_back(pose);
     path.s_m.push_back(s);
     path.speed_mps.push_back(v_mid + speed(t));
-    if (i > 0) path.distance_m += (pos - prev_pos).norm();
-    prev_pos = pos;
+    if (i > 0) path.distance_m += (pose.translation - prev_pos).norm();
+    prev_pos = pose.translation;
   }
   return path;
 }

@@ -32,11 +32,16 @@ struct PathOptions {
   double pitch_down_min_deg = 2.0, pitch_down_max_deg = 5.0;
   double vibration_deg = 0.3;        // peak pitch vibration; roll gets 0.7 of it
   double heading_smoothing_m = 4.0;  // half-window of the heading average
+  // Also pose the camera half a frame after each frame (an interlaced
+  // camera's second field): CameraPath::half_frame_world_from_cam.
+  bool half_frame_poses = false;
 };
 
 struct CameraPath {
   std::vector<double> timestamps_s;
   std::vector<Rigid3d> world_from_cam;
+  // With PathOptions::half_frame_poses: the pose at timestamps_s[i] + 0.5 / fps.
+  std::vector<Rigid3d> half_frame_world_from_cam;
   std::vector<double> s_m;        // centreline arc length of each frame
   std::vector<double> speed_mps;  // the car's speed at each frame
   double distance_m = 0.0;        // driven from the first to the last frame

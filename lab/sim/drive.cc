@@ -40,6 +40,7 @@ StatusOr<Drive> PrepareDrive(const SimulateOptions& o) {
   path.camera_height_max_m = o.camera_height_max_m;
   path.pitch_down_min_deg = o.pitch_down_min_deg;
   path.pitch_down_max_deg = o.pitch_down_max_deg;
+  path.half_frame_poses = o.encoder.interlaced;  // the bottom fields' instants
 
   SceneOptions scene = SceneOptionsFor(o.scene_kind);
   scene.appearance_variety = o.appearance_variety;

@@ -29,6 +29,7 @@ Status WriteMeta(const SimulateOptions& o, const EncoderOptions& eo, const Drive
   meta["gop_size"] = eo.gop_size;
   meta["quality"] = eo.quality;
   meta["mpeg4_qpel"] = eo.mpeg4_qpel;
+  meta["interlaced"] = eo.interlaced;
   meta["fps"] = o.fps;
   meta["frames"] = gt.frames.size();
   meta["width_px"] = o.width_px;
@@ -72,6 +73,12 @@ void ApplyCameraOptics(const SimulateOptions& o, size_t frame, cv::Mat* bgr) {
   }
 }
 
+// An interlaced camera's frame: the odd rows (bottom field) of `bottom_field`
+// over `frame`'s even rows (top field).
+void WeaveBottomField(const cv::Mat& bottom_field, cv::Mat* frame) {
+  for (int r = 1; r < frame->rows; r += 2) bottom_field.row(r).copyTo(frame->row(r));
+}
+
 }  // namespace
 
 Status SimulateDrive(const SimulateOptions& o, SimulateReport* report) {
@@ -108,11 +115,17 @@ Status SimulateDrive(const SimulateOptions& o, SimulateReport* report) {
   gt.intrinsics = drive.intrinsics;
   gt.planes = drive.scene.planes;
   gt.fps = o.fps;
-  RenderedFrame frame;
+  RenderedFrame frame, bottom_field;
   const size_t n = drive.path.world_from_cam.size();
+  const bool interlaced = !drive.path.half_frame_world_from_cam.empty();
   for (size_t i = 0; i < n; ++i) {
     const auto t0 = Clock::now();
     SLAPSE_RETURN_IF_ERROR(renderer.Render(drive.path.world_from_cam[i], &frame));
+    if (interlaced) {
+      SLAPSE_RETURN_IF_ERROR(
+          renderer.Render(drive.path.half_frame_world_from_cam[i], &bottom_field));
+      WeaveBottomField(bottom_field.bgr, &frame.bgr);
+    }
     ApplyCameraOptics(o, i, &frame.bgr);
     const auto t1 = Clock::now();
     SLAPSE_RETURN_IF_ERROR(encoder.Write(frame.bgr));

@@ -44,7 +44,11 @@ struct SimulateOptions {
   // (sigma, 8-bit levels; 0: none; seeded per frame from the seed).
   double blur_px = 0.0;
   double sensor_noise = 0.0;
-  // Encoder settings; its fps is replaced by `fps`.
+  // Encoder settings; its fps is replaced by `fps`. An interlaced encoder
+  // (EncoderOptions::interlaced) is an interlaced camera: each frame's bottom
+  // field (odd rows) is rendered half a frame after its top field (even rows),
+  // as the sensor captures them; the ground truth's pose and labels are the
+  // top field's (the frame's timestamp).
   EncoderOptions encoder;
   std::string output_dir;
   std::string video_name = "drive.ts";
