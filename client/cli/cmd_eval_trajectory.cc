@@ -104,7 +104,10 @@ int RunEvalTrajectory(int argc, char** argv) {
     return Fail("eval-trajectory", "unexpected argument '" + cl.positional()[0] + "'", 2);
   }
   for (const Status& s : {CheckRange("seeds-per-kind", seeds_per_kind, int64_t{1}, int64_t{1000}),
-                          CheckRange("jobs", jobs, int64_t{1}, int64_t{64}), eo.Check()}) {
+                          CheckRange("jobs", jobs, int64_t{1}, int64_t{64}),
+                          CheckRange("refine-window", int64_t{eo.pipeline.refine.window_anchors},
+                                     int64_t{3}, int64_t{30}),
+                          eo.Check()}) {
     if (!s.ok()) return Fail("eval-trajectory", s.message(), 2);
   }
   eo.reuse = !fresh;
