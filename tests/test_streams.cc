@@ -19,6 +19,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/common/intrinsics_io.h"
+#include "core/mv/mpeg2_syntax.h"
 
 namespace slapse::testing {
 
@@ -118,17 +119,13 @@ std::vector<std::string> Pictures(const std::vector<std::string>& units) {
 // picture_structure (1 top, 2 bottom); top_field_first, frame_pred_frame_dct,
 // chroma_420_type and progressive_frame 0 (a field picture's values).
 std::string AsFieldPicture(std::string picture, int structure) {
-  for (size_t i = 0; i + 8 < picture.size(); ++i) {
-    if (picture[i] != 0 || picture[i + 1] != 0 || picture[i + 2] != 1 ||
-        static_cast<uint8_t>(picture[i + 3]) != 0xB5 ||
-        (static_cast<uint8_t>(picture[i + 4]) >> 4) != 8) {
-      continue;
-    }
-    picture[i + 6] = static_cast<char>((picture[i + 6] & 0xFC) | structure);
-    picture[i + 7] = static_cast<char>(picture[i + 7] & ~0xC1);
-    picture[i + 8] = static_cast<char>(picture[i + 8] & ~0x80);
-    break;
-  }
+  const size_t i = FindMpeg2PictureCodingExtension(reinterpret_cast<const uint8_t*>(picture.data()),
+                                                   picture.size());
+  if (i + 8 >= picture.size()) return picture;
+  const size_t ps = i + kMpeg2PictureStructureByte;
+  picture[ps] = static_cast<char>((picture[ps] & 0xFC) | structure);
+  picture[i + 7] = static_cast<char>(picture[i + 7] & ~0xC1);
+  picture[i + 8] = static_cast<char>(picture[i + 8] & ~0x80);
   return picture;
 }
 
@@ -185,7 +182,8 @@ Status WriteMpeg2IntraFieldPictures(const std::string& path, int frames, double 
       std::string picture = u;
       while (i + 1 < top.size() && InPicture(top[i + 1])) picture += top[++i];
       if (next_bottom >= bottom.size()) return InternalError("fewer bottom than top fields");
-      out += AsFieldPicture(picture, 1) + AsFieldPicture(bottom[next_bottom++], 2);
+      out += AsFieldPicture(picture, kMpeg2TopField) +
+             AsFieldPicture(bottom[next_bottom++], kMpeg2BottomField);
       continue;
     } else if (InPicture(u)) {
       continue;  // (not reached: a picture's units follow its header)

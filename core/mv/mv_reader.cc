@@ -14,6 +14,8 @@ extern "C" {
 #include <libswscale/swscale.h>
 }
 
+#include "core/mv/mpeg2_syntax.h"
+
 namespace slapse {
 namespace {
 
@@ -64,13 +66,14 @@ Status OpenError(const std::string& url, int err) {
   return UnavailableError(what);
 }
 
-// True if `data` holds an MPEG-2 picture coding extension (00 00 01 B5, id 8)
-// whose picture_structure is a field (1 top, 2 bottom; 3 is a frame picture).
+// True if `data` holds an MPEG-2 picture coding extension whose
+// picture_structure is a field (core/mv/mpeg2_syntax.h).
 bool HasFieldPicture(const uint8_t* data, int size) {
-  for (int i = 0; i + 6 < size; ++i) {
-    if (data[i] != 0 || data[i + 1] != 0 || data[i + 2] != 1 || data[i + 3] != 0xB5) continue;
-    const int structure = data[i + 6] & 3;
-    if ((data[i + 4] >> 4) == 8 && (structure == 1 || structure == 2)) return true;
+  const size_t n = size > 0 ? static_cast<size_t>(size) : 0;
+  for (size_t i = FindMpeg2PictureCodingExtension(data, n); i < n;
+       i = FindMpeg2PictureCodingExtension(data, n, i + 1)) {
+    const int structure = data[i + kMpeg2PictureStructureByte] & 3;
+    if (structure == kMpeg2TopField || structure == kMpeg2BottomField) return true;
   }
   return false;
 }
