@@ -53,15 +53,13 @@ struct Acc {
 
 // The pair's correspondences against the true motion: *in within the
 // threshold of the true epipolar geometry, *par of them with rotation-only
-// parallax >= min_parallax_px under the true rotation.
+// parallax >= min_parallax_px under the true rotation (KRKinv = K R K^-1).
 void CountAgainstTruth(const slapse::AnchorPair& pair, const slapse::Intrinsics& k,
-                       const slapse::Rigid3d& truth, double threshold_px, double min_parallax_px,
-                       int* in, int* par) {
+                       const slapse::Rigid3d& truth, const Eigen::Matrix3d& KRKinv,
+                       double threshold_px, double min_parallax_px, int* in, int* par) {
   *in = *par = 0;
   const double f = 0.5 * (k.fx_px + k.fy_px);
   const Eigen::Matrix3d E = slapse::Skew(truth.translation.normalized()) * truth.R();
-  const Eigen::Matrix3d K = k.K();
-  const Eigen::Matrix3d KRKinv = K * truth.R() * K.inverse();
   for (const slapse::Correspondence& c : pair.correspondences) {
     const double d = std::abs(
         slapse::SampsonDistance(E, k.Unproject(c.x_earlier_px), k.Unproject(c.x_later_px)));
@@ -76,11 +74,10 @@ void CountAgainstTruth(const slapse::AnchorPair& pair, const slapse::Intrinsics&
 // *gain: the least-squares factor from the true flow to the decoded one over
 // the *ok vectors (1: unbiased; < 1: the vectors are short).
 void CountRoad(const slapse::AnchorPair& pair, const slapse::GroundTruth& gt,
-               const slapse::Rigid3d& truth, double min_parallax_px, int* n, int* ok, int* ok_par,
+               const Eigen::Matrix3d& KRKinv, double min_parallax_px, int* n, int* ok, int* ok_par,
                double* gain) {
   *n = *ok = *ok_par = 0;
   double dot = 0.0, sq = 0.0;
-  const Eigen::Matrix3d KRKinv = gt.intrinsics.K() * truth.R() * gt.intrinsics.K().inverse();
   for (const slapse::Correspondence& c : pair.correspondences) {
     if (gt.LabelAt(static_cast<int>(pair.later_index), c.x_later_px.x(), c.x_later_px.y()) != 0) {
       continue;
@@ -107,8 +104,10 @@ void PrintPair(const slapse::AnchorPair& pair, const slapse::PairMotionReport& r
   const slapse::Intrinsics& k = gt.intrinsics;
   int true_in = 0, true_par = 0, road = 0, road_ok = 0, road_ok_par = 0;
   double road_gain = 0.0;
-  CountAgainstTruth(pair, k, truth, o.ransac_threshold_px, o.tau_inf_px, &true_in, &true_par);
-  CountRoad(pair, gt, truth, o.tau_inf_px, &road, &road_ok, &road_ok_par, &road_gain);
+  const Eigen::Matrix3d KRKinv = k.K() * truth.R() * k.K().inverse();
+  CountAgainstTruth(pair, k, truth, KRKinv, o.ransac_threshold_px, o.tau_inf_px, &true_in,
+                    &true_par);
+  CountRoad(pair, gt, KRKinv, o.tau_inf_px, &road, &road_ok, &road_ok_par, &road_gain);
   const double er = r.has_motion ? AngleDeg(r.later_from_earlier.R(), truth.R()) : -1;
   const double et =
       r.has_motion ? slapse::AngleBetweenDeg(r.later_from_earlier.translation, truth.translation)
