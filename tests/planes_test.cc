@@ -483,6 +483,37 @@ TEST(ThresholdInfinityTest, SeededFastPathFallsBack) {
   EXPECT_LT(RotationAngleDeg(result->later_from_earlier.R(), rot.later_from_earlier.R()), 0.05);
 }
 
+// An open road (no facades, everything above the horizon far away): most
+// E-inliers carry no parallax and triangulate at depths of either sign, the
+// road's points all in front. The fast path counts cheirality over the
+// parallax points only, so it is taken here (it was refused while it needed
+// half of all E-inliers in front) and it recovers the motion.
+TEST(ThresholdInfinityTest, SeededFastPathOnAnOpenRoad) {
+  SceneNoise noise;
+  noise.seed = 9;
+  noise.outlier_ratio = 0.1;
+  const std::vector<ScenePlane> open_road = {{kRoad, {0, 1, 0}, 1.5, 25.0, -1e9}};
+  const SyntheticPair first = MakePair(Frame0(), Frame1(), 0, noise, open_road);
+  const auto full = ThresholdInfinity(first.pair.correspondences, TestIntrinsics(), {});
+  ASSERT_TRUE(full.ok() && full->has_motion);
+  // Far points are most of the E-inliers, so cheirality over all of them
+  // cannot decide.
+  EXPECT_LT(full->num_parallax_inliers, 0.5 * full->num_e_inliers);
+  PairMotionPriorTracker tracker;
+  tracker.Record(first.pair, &*full);
+
+  const SyntheticPair second = MakePair(Frame1(), Frame2(), 1, noise, open_road);
+  const auto seeded = ThresholdInfinity(second.pair.correspondences, TestIntrinsics(), {},
+                                        tracker.PriorFor(second.pair));
+  ASSERT_TRUE(seeded.ok() && seeded->has_motion);
+  EXPECT_TRUE(seeded->motion_from_prior);
+  EXPECT_LT(seeded->num_cheirality_inliers, 0.5 * seeded->num_e_inliers);
+  EXPECT_LT(RotationAngleDeg(seeded->later_from_earlier.R(), second.later_from_earlier.R()), 0.05);
+  EXPECT_GT(seeded->later_from_earlier.translation.dot(
+                second.later_from_earlier.translation.normalized()),
+            std::cos(2.0 * kDegToRad));
+}
+
 // The tracker hands a pair's motion to the next consecutive pair only.
 TEST(InfinityPriorTrackerTest, PriorOnlyForConsecutivePairsWithMotion) {
   SceneNoise noise;
