@@ -313,6 +313,13 @@ Status EssentialMotion(const MotionProblem& p, PairMotionReport* result, bool* h
 // later_from_earlier = (R_rotation_only, 0) -- or the identity when even that
 // fit fails or there are fewer than max(min_correspondences, 5) correspondences
 // (then nothing is estimated). Tests (a)-(c) are the has_motion decision below.
+// With has_motion, MAGSAC's motion is then polished by the fast path's
+// RefineRelativePose (kept when it has at least as many Sampson inliers):
+// MAGSAC's E is not the least-squares optimum of the Sampson distances, and
+// the polished motion was closer to the truth on the tuning drives (rotation
+// RMSE 0.057 -> 0.051 deg, heading 1.39 -> 0.99 deg on H.264 IPPP; 0.143 ->
+// 0.136 deg and 3.07 -> 2.96 deg on MPEG-2, `bench/motion_accuracy`), so both
+// paths now give the same kind of estimate.
 Status FullPath(const MotionProblem& p, PairMotionReport* result) {
   const RansacReport<Eigen::Matrix3d> rotation =
       Ransac<RotationOnlyEstimator>(p.rotation_ransac).Estimate(p.rays_earlier, p.rays_later);
@@ -346,6 +353,15 @@ Status FullPath(const MotionProblem& p, PairMotionReport* result) {
     result->R_later_from_earlier = R_e;
     result->num_sampson_inliers = CountSampsonInliers(
         p.rays_earlier, p.rays_later, result->later_from_earlier, p.normalised_threshold);
+    RelativePoseRefineOptions refine_options;
+    refine_options.max_error = p.normalised_threshold;
+    const RelativePoseRefineReport refined = RefineRelativePose(
+        p.rays_earlier, p.rays_later, result->later_from_earlier, refine_options);
+    if (refined.success && refined.num_inliers >= result->num_sampson_inliers) {
+      result->later_from_earlier = refined.later_from_earlier;
+      result->R_later_from_earlier = refined.later_from_earlier.R();
+      result->num_sampson_inliers = refined.num_inliers;
+    }
   } else if (rotation.success) {
     result->rotation_source = PairRotationSource::kRotationOnly;
     result->later_from_earlier = Rigid3d(rotation.model, Eigen::Vector3d::Zero());
