@@ -15,7 +15,8 @@
 //
 // The estimate (EstimatePairMotion; details above each part in pair_motion.cc):
 //  - full path: the essential matrix by USAC_MAGSAC with recoverPose's
-//    cheirality, and a rotation-only model by our Ransac<>; translation counts
+//    cheirality (the motion then polished by RefineRelativePose, as the fast
+//    path's), and a rotation-only model by our Ransac<>; translation counts
 //    as observed (has_motion) only when enough E-inliers carry parallax that
 //    the rotation-only model cannot explain, else the rotation-only model (or
 //    the identity) is the motion;
