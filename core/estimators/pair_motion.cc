@@ -117,6 +117,7 @@ struct MotionProblem {
   double normalised_threshold = 0.0;  // ransac_threshold_px / mean focal length
   double min_parallax_px = 0.0;       // max(min_parallax_px, ransac_threshold_px)
   RansacOptions rotation_ransac;
+  RelativePoseRefineOptions refine;  // both paths' Sampson refinement, at normalised_threshold
 };
 
 // Test (c') of FullPath. Wrong MVs (foliage, repeated texture, low-texture
@@ -187,10 +188,8 @@ constexpr double kMinParallaxCheiralityShare = 0.75;
 bool SeededFastPath(const MotionProblem& p, const PairMotionPrior& prior,
                     PairMotionReport* result) {
   const int n = static_cast<int>(p.correspondences.size());
-  RelativePoseRefineOptions refine_options;
-  refine_options.max_error = p.normalised_threshold;
   const RelativePoseRefineReport refined =
-      RefineRelativePose(p.rays_earlier, p.rays_later, prior.later_from_earlier, refine_options);
+      RefineRelativePose(p.rays_earlier, p.rays_later, prior.later_from_earlier, p.refine);
   if (!refined.success || !(refined.num_inliers >=
                             p.options.prior_min_inlier_ratio * prior.reference_inlier_ratio * n)) {
     return false;
@@ -353,10 +352,8 @@ Status FullPath(const MotionProblem& p, PairMotionReport* result) {
     result->R_later_from_earlier = R_e;
     result->num_sampson_inliers = CountSampsonInliers(
         p.rays_earlier, p.rays_later, result->later_from_earlier, p.normalised_threshold);
-    RelativePoseRefineOptions refine_options;
-    refine_options.max_error = p.normalised_threshold;
-    const RelativePoseRefineReport refined = RefineRelativePose(
-        p.rays_earlier, p.rays_later, result->later_from_earlier, refine_options);
+    const RelativePoseRefineReport refined =
+        RefineRelativePose(p.rays_earlier, p.rays_later, result->later_from_earlier, p.refine);
     if (refined.success && refined.num_inliers >= result->num_sampson_inliers) {
       result->later_from_earlier = refined.later_from_earlier;
       result->R_later_from_earlier = refined.later_from_earlier.R();
@@ -417,6 +414,7 @@ StatusOr<PairMotionReport> EstimatePairMotion(const std::vector<Correspondence>&
   const double mean_focal_px = 0.5 * (intrinsics.fx_px + intrinsics.fy_px);
   p.normalised_threshold = options.ransac_threshold_px / mean_focal_px;
   p.rotation_ransac.max_error = p.normalised_threshold;
+  p.refine.max_error = p.normalised_threshold;
   p.rotation_ransac.confidence = options.confidence;
   p.min_parallax_px = std::max(min_parallax_px, options.ransac_threshold_px);
 
