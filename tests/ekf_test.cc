@@ -536,5 +536,34 @@ TEST(PlaneEkfTest, MotionMeasurementGateAndBadInput) {
   EXPECT_TRUE(rep.motion_updated);
 }
 
+// A car's direction of travel stays put in its camera's frame: after three
+// steps without any measurement (coasting at 0.4 s per anchor step, as on a
+// 10 fps drive whose MVs exceed the search range), a fit 70 deg off the
+// travel is still refused, while one 3 deg off is taken. With the velocity's
+// random walk isotropic (lateral_accel_per_s = relative_accel_per_s) the
+// wrong fit passes the gate.
+TEST(PlaneEkfTest, MotionGateHoldsTheDirectionOfTravelWhileCoasting) {
+  const Intrinsics K = Intrinsics::FromHorizontalFov(640, 480, 70);
+  const auto poses = DrivePoses(6, 1.0);
+  const double dt = 0.4;
+  auto run = [&](const EkfOptions& options, double off_deg) {
+    PlaneEkf ekf(K, options);
+    EXPECT_TRUE(ekf.Initialize(poses[0].Inverse() * poses[1], dt).ok());
+    for (int k = 0; k < 4; ++k) EXPECT_TRUE(ekf.Predict(dt).ok());
+    const Rigid3d step = poses[4].Inverse() * poses[5];
+    const Rigid3d fit(step.R(),
+                      ExpSO3(Eigen::Vector3d(0, DegToRad(off_deg), 0)) * step.translation);
+    UpdateReport rep;
+    EXPECT_TRUE(ekf.UpdateMotion(fit, &rep).ok());
+    return rep;
+  };
+  const EkfOptions defaults;
+  EXPECT_FALSE(run(defaults, 70).motion_updated);
+  EXPECT_TRUE(run(defaults, 3).motion_updated);
+  EkfOptions isotropic;
+  isotropic.lateral_accel_per_s = isotropic.relative_accel_per_s;
+  EXPECT_TRUE(run(isotropic, 70).motion_updated) << "the test no longer separates the models";
+}
+
 }  // namespace
 }  // namespace slapse

@@ -141,9 +141,10 @@ Status PlaneEkf::Predict(double dt_s) {
   const EkfState y = PredictState(x, dt_s, &F);
 
   // Process noise G Q G^T. Noise enters the new step motion (n_theta, n_t:
-  // deviation from constant velocity), the velocities (random walks n_w, n_v)
-  // and each plane (n_pi); a plane's transition sees the new step motion, so
-  // it also receives B n_theta + C n_t.
+  // deviation from constant velocity), the velocities (random walks n_w, n_v;
+  // n_v split along u = v / |v| and across it: Q_v = dt (s_a^2 u u^T +
+  // s_l^2 (I - u u^T)) |v|^2) and each plane (n_pi); a plane's transition
+  // sees the new step motion, so it also receives B n_theta + C n_t.
   const Eigen::Matrix3d q_theta =
       std::pow(options_.step_rotation_rad, 2) * Eigen::Matrix3d::Identity();
   const Eigen::Matrix3d q_t = (std::pow(options_.step_translation_rel * y.t.norm(), 2) + 1e-12) *
@@ -152,8 +153,15 @@ Status PlaneEkf::Predict(double dt_s) {
   GQG.block<3, 3>(kTheta, kTheta) = q_theta;
   GQG.block<3, 3>(kT, kT) = q_t;
   GQG.block<3, 3>(kW, kW).diagonal().setConstant(std::pow(options_.angular_accel_rad_s2, 2) * dt_s);
-  GQG.block<3, 3>(kV, kV).diagonal().setConstant(
-      std::pow(options_.relative_accel_per_s * v_.norm(), 2) * dt_s + 1e-12);
+  {
+    const double speed = v_.norm();
+    const Eigen::Vector3d u = speed > 0 ? Eigen::Vector3d(v_ / speed) : Eigen::Vector3d::UnitZ();
+    const double q_along = std::pow(options_.relative_accel_per_s * speed, 2) * dt_s;
+    const double q_across = std::pow(options_.lateral_accel_per_s * speed, 2) * dt_s;
+    GQG.block<3, 3>(kV, kV) = q_along * u * u.transpose() +
+                              q_across * (Eigen::Matrix3d::Identity() - u * u.transpose()) +
+                              1e-12 * Eigen::Matrix3d::Identity();
+  }
   std::vector<Eigen::Matrix3d> B(planes_.size()), C(planes_.size());
   for (size_t i = 0; i < planes_.size(); ++i) {
     TransitionPlane(x.pis[i], y.R, y.t, nullptr, &B[i], &C[i]);
