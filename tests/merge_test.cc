@@ -392,6 +392,55 @@ TEST(SegmentMergerTest, ChainingOffKeepsOneFrameSegmentsAndIFramesBreakChains) {
   EXPECT_EQ(out[1].later_index, 6);
 }
 
+// ExtendChain (a pair too short to initialise on): with chaining off, the next
+// P frame is composed onto the given pair and emitted at once, as exactly as
+// a fixed chain; each further call extends it again; without a call the
+// merger is back to one pair per frame; an I frame ends the extension.
+TEST(SegmentMergerTest, ExtendChainGrowsTheLastPairFrameByFrame) {
+  const double s = 0.99;
+  const Eigen::Vector2d b(0.7, -0.3), c(80, 60);
+  SegmentMerger merger(160, 128, kSigma);  // chain_min_frames 1
+  std::optional<AnchorPair> pair;
+  for (int i = 0; i <= 1; ++i) pair = merger.Push(ZoomFrame(i, 10, 8, s, b));
+  ASSERT_TRUE(pair);
+  ASSERT_EQ(pair->later_index, 1);
+  for (int i = 2; i <= 4; ++i) {
+    merger.ExtendChain(*pair);
+    pair = merger.Push(ZoomFrame(i, 10, 8, s, b));
+    ASSERT_TRUE(pair) << i;
+    EXPECT_EQ(pair->earlier_index, 0);
+    EXPECT_EQ(pair->later_index, i);
+    EXPECT_EQ(pair->type, SegmentType::kIP);
+    EXPECT_GT(pair->correspondences.size(), 40u);
+    for (const Correspondence& corr : pair->correspondences) {
+      Eigen::Vector2d x = corr.x_later_px;
+      for (int k = 0; k < i; ++k) x = s * (x - c) + c + b;
+      EXPECT_LT((corr.x_earlier_px - x).norm(), 0.1) << i << ": " << corr.x_later_px.transpose();
+      EXPECT_NEAR(corr.variance_px2, i * kSigma * kSigma, 1e-12);
+    }
+  }
+  pair = merger.Push(ZoomFrame(5, 10, 8, s, b));  // no call: one frame again
+  ASSERT_TRUE(pair);
+  EXPECT_EQ(pair->earlier_index, 4);
+  merger.ExtendChain(*pair);
+  FrameRecord i_frame = ZoomFrame(6, 10, 8, s, b);
+  i_frame.type = PictureType::kI;
+  i_frame.mvs.clear();
+  pair = merger.Push(i_frame);
+  ASSERT_TRUE(pair);
+  EXPECT_EQ(pair->earlier_index, 5);
+  pair = merger.Push(ZoomFrame(7, 10, 8, s, b));
+  ASSERT_TRUE(pair);
+  EXPECT_EQ(pair->earlier_index, 6);
+  // A pair that does not end at the current anchor is ignored.
+  AnchorPair stale = *pair;
+  stale.later_index = 3;
+  merger.ExtendChain(stale);
+  pair = merger.Push(ZoomFrame(8, 10, 8, s, b));
+  ASSERT_TRUE(pair);
+  EXPECT_EQ(pair->earlier_index, 7);
+}
+
 }  // namespace
 }  // namespace slapse
 

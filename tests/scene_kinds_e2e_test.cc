@@ -11,6 +11,7 @@
 // motion_only_steps), and without them they do not initialise at all.
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -22,7 +23,8 @@ namespace slapse {
 namespace {
 
 DriveResult RunSmallDrive(SceneKind kind, int seed, const PipelineOptions& pipeline = {},
-                          const std::string& profile = "mpeg2-ibbbp") {
+                          const std::string& profile = "mpeg2-ibbbp",
+                          const std::function<void(SimulateOptions*)>& adjust = {}) {
   DriveSpec spec = MakeDriveSpec(kind, seed);
   spec.name = "e2e-" + spec.name;
   SimulateOptions& o = spec.sim;
@@ -33,6 +35,7 @@ DriveResult RunSmallDrive(SceneKind kind, int seed, const PipelineOptions& pipel
   o.hfov_deg = 70.0;
   o.supersampling = 1;
   o.blur_px = 0.0;
+  if (adjust) adjust(&o);
   DriveEvalOptions eo;
   eo.pipeline = pipeline;
   eo.profile = profile;
@@ -128,6 +131,30 @@ TEST(SceneKindsEndToEndTest, WindowRefinerHoldsOnOneFramePairs) {
     ASSERT_TRUE(alone.evaluated);
     EXPECT_LT(window.ate_m, 2.0 * alone.ate_m + 0.02) << window.spec.name;
   }
+}
+
+// A car park at 11-14 km/h, 60 fps, H.264 IPPP: one frame moves the camera 5-7 cm,
+// too little parallax to decide the pair's motion. While waiting to
+// initialise, the pair is extended frame by frame
+// (PipelineOptions::init_max_baseline_s) until the parallax decides it: posed
+// from the first frame on. Without the extension the drive waits.
+TEST(SceneKindsEndToEndTest, SlowDriveAt60FpsInitialisesOnAnExtendedBaseline) {
+  auto slow = [](SimulateOptions* o) {
+    o->fps = 60.0;
+    o->duration_s = 2.0;
+    o->min_speed_mps = 3.0;
+    o->max_speed_mps = 4.0;
+  };
+  PipelineOptions no_extension;
+  no_extension.init_max_baseline_s = 0.0;
+  const DriveResult r = RunSmallDrive(SceneKind::kPlaza, 2, {}, "h264-ippp", slow);
+  const DriveResult without = RunSmallDrive(SceneKind::kPlaza, 2, no_extension, "h264-ippp", slow);
+  ASSERT_TRUE(r.evaluated);
+  EXPECT_EQ(r.first_pose_frame, 0);
+  EXPECT_EQ(r.posed_frames, r.frames);
+  EXPECT_LT(r.ate_m, 0.05 * r.distance_m);
+  EXPECT_TRUE(without.first_pose_frame < 0 || without.first_pose_frame > 1)
+      << "the extension is no longer what initialises this drive";
 }
 
 }  // namespace

@@ -126,6 +126,13 @@ void SegmentMerger::Reset() {
   earlier_.reset();
   b_frames_.clear();
   chain_.reset();
+  extend_next_ = false;
+}
+
+void SegmentMerger::ExtendChain(AnchorPair pair) {
+  if (!earlier_.has_value() || pair.later_index != earlier_->index) return;
+  chain_ = std::move(pair);
+  extend_next_ = true;
 }
 
 int SegmentMerger::CellOf(const Eigen::Vector2d& x_px) const {
@@ -151,14 +158,17 @@ std::optional<AnchorPair> SegmentMerger::Push(const FrameRecord& frame) {
   if (!IsAnchor(frame.type)) return std::nullopt;
   std::optional<AnchorPair> pair;
   if (earlier_.has_value()) pair = Build(frame);
-  const bool chainable = pair.has_value() && options_.chain_min_frames > 1 &&
-                         frame.type == PictureType::kP && b_frames_.empty() &&
-                         pair->later_index - pair->earlier_index < options_.chain_min_frames;
+  const bool chainable = pair.has_value() && frame.type == PictureType::kP &&
+                         b_frames_.empty() &&
+                         (extend_next_ || (options_.chain_min_frames > 1 &&
+                                           pair->later_index - pair->earlier_index <
+                                               options_.chain_min_frames));
   if (chainable) {
     pair = Chain(std::move(*pair));
   } else {
     chain_.reset();
   }
+  extend_next_ = false;
   earlier_ = frame;
   earlier_->mvs.clear();
   earlier_->luma.clear();
@@ -229,7 +239,7 @@ std::optional<AnchorPair> SegmentMerger::Chain(AnchorPair step) {
   } else {
     chain_ = std::move(step);
   }
-  if (chain_->later_index - chain_->earlier_index < options_.chain_min_frames) {
+  if (!extend_next_ && chain_->later_index - chain_->earlier_index < options_.chain_min_frames) {
     return std::nullopt;
   }
   std::optional<AnchorPair> done = std::move(chain_);

@@ -115,6 +115,13 @@ class SegmentMerger {
   // from then on B frames are not merged: direct vectors only.
   std::optional<AnchorPair> Push(const FrameRecord& frame);
   void Reset();
+  // `pair`, the pair just emitted, becomes the open chain: if the next
+  // segment is a one-frame P segment, its vectors are composed onto `pair`
+  // and the longer pair is emitted at once, whatever chain_min_frames (a
+  // longer baseline for a pair whose one-frame parallax was too small to
+  // initialise on). Ignored unless `pair` ends at the current anchor; an
+  // unchainable next segment (B frames, an I frame) starts afresh.
+  void ExtendChain(AnchorPair pair);
 
   bool b_pyramid_seen() const { return b_pyramid_seen_; }
   int mb_cols() const { return mb_cols_; }
@@ -143,6 +150,7 @@ class SegmentMerger {
   // P-frame chain: the pair from the chain's first anchor to its last one,
   // with one correspondence per macroblock cell of the last anchor (or none).
   std::optional<AnchorPair> chain_;
+  bool extend_next_ = false;  // ExtendChain: emit the next composition at once
   bool b_pyramid_seen_ = false;
 };
 

@@ -58,6 +58,10 @@ class FrontEnd {
   // and the motion prior (track ids keep increasing).
   void Reset();
 
+  // `pair` (the last step's) had too short a baseline: the next one-frame P
+  // pair is composed onto it and emitted at once (SegmentMerger::ExtendChain).
+  void ExtendBaseline(const AnchorPair& pair) { merger_.ExtendChain(pair); }
+
   const Intrinsics& intrinsics() const { return intrinsics_; }
   // The extractor's learnt vertical (PlaneExtractor::vertical_down).
   const Eigen::Vector3d& vertical_down() const { return extractor_.vertical_down(); }

@@ -33,6 +33,19 @@ std::vector<PlaneObservation> ObservationsOf(const AnchorPair& pair,
   return observations;
 }
 
+// A pair without motion whose baseline is too short for its depths, rather
+// than one whose vectors are wrong: at least half of the vectors off the
+// rotation-only model (by tau_inf) are inliers of the pair's essential
+// matrix, yet too few triangulate in front within recoverPose's 50-baseline
+// depth bound (a car park at 60 fps). Where most such vectors miss the
+// essential matrix (a fast drive whose near-road vectors exceed the search
+// range) a longer baseline only makes them worse. No vector off the
+// rotation-only model (a still camera): too short as well.
+bool BaselineTooShort(const PairMotionReport& motion) {
+  if (motion.has_motion) return false;
+  return motion.num_parallax_inliers * 2 >= motion.num_rotation_outliers;
+}
+
 }  // namespace
 
 Pipeline::Pipeline(const Intrinsics& intrinsics, double sigma_px, PipelineOptions options)
@@ -84,10 +97,16 @@ PipelineStep Pipeline::Process(const FrontEndStep& front) {
 
   const auto t0 = std::chrono::steady_clock::now();
   const Rigid3d world_from_cam_before = world_from_cam_;
+  bool extend_baseline = false;
   if (!(dt_s > 0)) {
     step.note = "anchor timestamps do not increase";
   } else if (!ekf_.initialized()) {
     Initialise(front, observations, dt_s, &step);
+    if (!step.tracking && front.infinity.ok() && BaselineTooShort(*front.infinity) &&
+        dt_s < options_.init_max_baseline_s) {
+      extend_baseline = true;
+      front_end_.ExtendBaseline(pair);
+    }
   } else {
     Advance(front, observations, dt_s, &step);
   }
@@ -131,6 +150,9 @@ PipelineStep Pipeline::Process(const FrontEndStep& front) {
     const auto t1 = std::chrono::steady_clock::now();
     AddFramePoses(pair, &step);
     step.times.frame_poses_ms = MsSince(t1);
+  } else if (extend_baseline) {
+    // The frames after the earlier anchor are inside the extended pair.
+    frame_poser_.Skip(pair.earlier_index);
   } else {
     frame_poser_.Skip(pair.later_index);
   }

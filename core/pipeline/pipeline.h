@@ -65,6 +65,16 @@ struct PipelineOptions : FrontEndOptions {
   // Initialise only on a pair with motion and at least this many planes
   // (unless motion_only_steps).
   int min_planes_to_initialise = 1;
+  // Adaptive baseline while waiting to initialise (docs/METHOD.md "Pair
+  // motion and plane at infinity"): a pair without reliable motion because
+  // its baseline is too short (BaselineTooShort: its vectors with parallax
+  // agree with its essential matrix, but do not triangulate within the depth
+  // bound) and whose anchors are less than this apart is not dropped; the
+  // next one-frame P segment is composed onto it (FrontEnd::ExtendBaseline),
+  // so at 60 fps or car-park speed the baseline grows frame by frame until
+  // the parallax decides the motion. B-frame segments are never extended.
+  // 0: off.
+  double init_max_baseline_s = 0.5;
   // Motion-only steps (docs/METHOD.md "Motion-only steps"): a pair with
   // reliable motion but no plane observed still tracks. It initialises the
   // filter (no planes needed), and where no tracked plane is observed the
