@@ -432,13 +432,21 @@ TEST(SegmentMergerTest, ExtendChainGrowsTheLastPairFrameByFrame) {
   pair = merger.Push(ZoomFrame(7, 10, 8, s, b));
   ASSERT_TRUE(pair);
   EXPECT_EQ(pair->earlier_index, 6);
-  // A pair that does not end at the current anchor is ignored.
+  // A pair that does not end at the current anchor is ignored, and so is one
+  // without correspondences.
   AnchorPair stale = *pair;
   stale.later_index = 3;
   merger.ExtendChain(stale);
   pair = merger.Push(ZoomFrame(8, 10, 8, s, b));
   ASSERT_TRUE(pair);
   EXPECT_EQ(pair->earlier_index, 7);
+  AnchorPair empty = *pair;
+  empty.correspondences.clear();
+  merger.ExtendChain(empty);
+  pair = merger.Push(ZoomFrame(9, 10, 8, s, b));
+  ASSERT_TRUE(pair);
+  EXPECT_EQ(pair->earlier_index, 8);
+  EXPECT_FALSE(pair->correspondences.empty());
 }
 
 }  // namespace

@@ -130,7 +130,10 @@ void SegmentMerger::Reset() {
 }
 
 void SegmentMerger::ExtendChain(AnchorPair pair) {
-  if (!earlier_.has_value() || pair.later_index != earlier_->index) return;
+  if (!earlier_.has_value() || pair.later_index != earlier_->index ||
+      pair.correspondences.empty()) {
+    return;
+  }
   chain_ = std::move(pair);
   extend_next_ = true;
 }

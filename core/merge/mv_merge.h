@@ -119,8 +119,9 @@ class SegmentMerger {
   // segment is a one-frame P segment, its vectors are composed onto `pair`
   // and the longer pair is emitted at once, whatever chain_min_frames (a
   // longer baseline for a pair whose one-frame parallax was too small to
-  // initialise on). Ignored unless `pair` ends at the current anchor; an
-  // unchainable next segment (B frames, an I frame) starts afresh.
+  // initialise on). Ignored unless `pair` ends at the current anchor and has
+  // correspondences (a pair into an I frame has none: nothing to compose
+  // onto); an unchainable next segment (B frames, an I frame) starts afresh.
   void ExtendChain(AnchorPair pair);
 
   bool b_pyramid_seen() const { return b_pyramid_seen_; }
