@@ -560,6 +560,11 @@ TEST(PlaneEkfTest, MotionGateHoldsTheDirectionOfTravelWhileCoasting) {
   const EkfOptions defaults;
   EXPECT_FALSE(run(defaults, 70).motion_updated);
   EXPECT_TRUE(run(defaults, 3).motion_updated);
+  // Nearly backwards: the residual (the sine of the angle) is small, the fit
+  // is as wrong as can be.
+  const UpdateReport backwards = run(defaults, 175);
+  EXPECT_FALSE(backwards.motion_updated);
+  EXPECT_GT(backwards.motion_chi2, defaults.motion_gate_chi2);
   EkfOptions isotropic;
   isotropic.lateral_accel_per_s = isotropic.relative_accel_per_s;
   EXPECT_TRUE(run(isotropic, 70).motion_updated) << "the test no longer separates the models";

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <set>
 
 #include <Eigen/Cholesky>
@@ -713,6 +714,13 @@ Status PlaneEkf::UpdateMotion(const Rigid3d& measured_prev_from_cur, UpdateRepor
   if (report == nullptr) report = &local;
   report->motion_updated = false;
   if (!(t_.norm() > 0)) return Status::Ok();  // no direction to compare: nothing observed
+  // The direction residual B^T u is the sine of the angle between the two
+  // directions: past 90 deg it shrinks again (0 for the opposite direction),
+  // so such a measurement would pass any gate. It is a wrong fit: refused.
+  if (t_.dot(measured_prev_from_cur.translation) <= 0) {
+    report->motion_chi2 = std::numeric_limits<double>::infinity();
+    return Status::Ok();
+  }
   Eigen::Matrix<double, 5, 6> J;
   const Eigen::Matrix<double, 5, 1> e = MotionError(R_, t_, measured_prev_from_cur, &J);
   const int n = static_cast<int>(P_.rows());

@@ -200,7 +200,9 @@ class PlaneEkf {
   //   P+ = (I - K H) P (I - K H)^T + K Q_m K^T (Joseph form, symmetrised),
   // with Q_m = diag(sigma_rot^2 I3, sigma_dir^2 I2). A measurement with
   // r^T S^-1 r > motion_gate_chi2 is refused (report->motion_updated false,
-  // state unchanged). FailedPrecondition before Initialize; InvalidArgument
+  // state unchanged), and so is a direction more than 90 deg off the
+  // predicted one (the residual, a sine, shrinks past 90 deg; motion_chi2 is
+  // then infinite). FailedPrecondition before Initialize; InvalidArgument
   // for a non-finite measurement or one without translation; Internal when S
   // is not positive definite.
   Status UpdateMotion(const Rigid3d& measured_prev_from_cur, UpdateReport* report);
