@@ -36,6 +36,7 @@ void ExpectSameCarried(const PipelineOptions& a, const PipelineOptions& b) {
   EXPECT_EQ(a.frame_poses.estimator.min_inliers, b.frame_poses.estimator.min_inliers);
   EXPECT_EQ(a.window_refine, b.window_refine);
   EXPECT_EQ(a.motion_only_steps, b.motion_only_steps);
+  EXPECT_EQ(a.init_max_baseline_s, b.init_max_baseline_s);
   EXPECT_EQ(a.refine.window_anchors, b.refine.window_anchors);
 }
 
@@ -87,6 +88,27 @@ TEST(PipelineOptionsRoundTrip, WindowRefine) {
   p.set_refine_window_anchors(31);
   EXPECT_EQ(api::ValidatePipelineOptions(p).code(), StatusCode::kInvalidArgument);
   p.set_refine_window_anchors(8);
+  EXPECT_TRUE(api::ValidatePipelineOptions(p).ok());
+}
+
+TEST(PipelineOptionsRoundTrip, InitMaxBaseline) {
+  v1::PipelineOptions p;
+  EXPECT_FALSE(p.has_init_max_baseline_s());
+  EXPECT_EQ(api::PipelineOptionsFromProto(p).init_max_baseline_s,
+            PipelineOptions{}.init_max_baseline_s);
+  PipelineOptions off;
+  off.init_max_baseline_s = 0.0;
+  ExpectRoundTrips(off);
+  EXPECT_TRUE(api::PipelineOptionsToProto(off).has_init_max_baseline_s());
+  for (double bad : {-0.1, 5.5, std::numeric_limits<double>::quiet_NaN()}) {
+    p.set_init_max_baseline_s(bad);
+    const Status s = api::ValidatePipelineOptions(p);
+    EXPECT_EQ(s.code(), StatusCode::kInvalidArgument) << bad;
+    EXPECT_NE(s.message().find("init_max_baseline_s"), std::string::npos) << s.message();
+  }
+  p.set_init_max_baseline_s(0.0);
+  EXPECT_TRUE(api::ValidatePipelineOptions(p).ok());
+  p.set_init_max_baseline_s(1.0);
   EXPECT_TRUE(api::ValidatePipelineOptions(p).ok());
 }
 

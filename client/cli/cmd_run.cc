@@ -216,6 +216,12 @@ int RunRun(int argc, char** argv) {
                  "(docs/METHOD.md)")
       ->type_name("BOOL")
       ->capture_default_str();
+  app.add_option("--init-max-baseline-s", po.init_max_baseline_s,
+                 "while waiting to initialise, extend a one-frame IPPP pair too short to decide "
+                 "the motion by the next frames up to this span; 0 = off (docs/METHOD.md)")
+      ->type_name("S")
+      ->check(CLI::Range(0.0, 5.0))
+      ->capture_default_str();
   bool quiet = false;
   app.add_flag("--quiet", quiet, "no progress line");
   MvReaderOptions ro;

@@ -65,8 +65,9 @@ struct PipelineOptions : FrontEndOptions {
   // Initialise only on a pair with motion and at least this many planes
   // (unless motion_only_steps).
   int min_planes_to_initialise = 1;
-  // Adaptive baseline while waiting to initialise (docs/METHOD.md "Pair
-  // motion and plane at infinity"): a pair without reliable motion because
+  // Adaptive baseline while waiting to initialise (docs/METHOD.md, the
+  // section of that name; wire: PipelineOptions.init_max_baseline_s, flag
+  // --init-max-baseline-s): a pair without reliable motion because
   // its baseline is too short (BaselineTooShort: its vectors with parallax
   // agree with its essential matrix, but do not triangulate within the depth
   // bound) and whose anchors are less than this apart is not dropped; the
