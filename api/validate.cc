@@ -485,9 +485,9 @@ Status ValidatePipelineOptions(const v1::PipelineOptions& p) {
   if (p.has_init_max_baseline_s() &&
       (!Finite(p.init_max_baseline_s()) || p.init_max_baseline_s() < 0 ||
        p.init_max_baseline_s() > kMaxInitBaselineS)) {
-    return InvalidArgumentError(
-        "pipeline_options.init_max_baseline_s must be in [0, 5] s (0 = off), got " +
-        std::to_string(p.init_max_baseline_s()));
+    return InvalidArgumentError("pipeline_options.init_max_baseline_s must be in [0, " +
+                                Num(kMaxInitBaselineS) + "] s (0 = off), got " +
+                                Num(p.init_max_baseline_s()));
   }
   auto positive = [](double v) { return Finite(v) && v > 0; };
   switch (p.scale_source()) {

@@ -405,7 +405,7 @@ TEST(SegmentMergerTest, ExtendChainGrowsTheLastPairFrameByFrame) {
   ASSERT_TRUE(pair);
   ASSERT_EQ(pair->later_index, 1);
   for (int i = 2; i <= 4; ++i) {
-    merger.ExtendChain(*pair);
+    EXPECT_TRUE(merger.ExtendChain(*pair));
     pair = merger.Push(ZoomFrame(i, 10, 8, s, b));
     ASSERT_TRUE(pair) << i;
     EXPECT_EQ(pair->earlier_index, 0);
@@ -422,7 +422,7 @@ TEST(SegmentMergerTest, ExtendChainGrowsTheLastPairFrameByFrame) {
   pair = merger.Push(ZoomFrame(5, 10, 8, s, b));  // no call: one frame again
   ASSERT_TRUE(pair);
   EXPECT_EQ(pair->earlier_index, 4);
-  merger.ExtendChain(*pair);
+  EXPECT_TRUE(merger.ExtendChain(*pair));
   FrameRecord i_frame = ZoomFrame(6, 10, 8, s, b);
   i_frame.type = PictureType::kI;
   i_frame.mvs.clear();
@@ -436,13 +436,13 @@ TEST(SegmentMergerTest, ExtendChainGrowsTheLastPairFrameByFrame) {
   // without correspondences.
   AnchorPair stale = *pair;
   stale.later_index = 3;
-  merger.ExtendChain(stale);
+  EXPECT_FALSE(merger.ExtendChain(stale));
   pair = merger.Push(ZoomFrame(8, 10, 8, s, b));
   ASSERT_TRUE(pair);
   EXPECT_EQ(pair->earlier_index, 7);
   AnchorPair empty = *pair;
   empty.correspondences.clear();
-  merger.ExtendChain(empty);
+  EXPECT_FALSE(merger.ExtendChain(empty));
   pair = merger.Push(ZoomFrame(9, 10, 8, s, b));
   ASSERT_TRUE(pair);
   EXPECT_EQ(pair->earlier_index, 8);

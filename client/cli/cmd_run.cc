@@ -11,6 +11,7 @@
 
 #include <opencv2/imgcodecs.hpp>
 
+#include "api/validate.h"
 #include "client/cli/commands.h"
 #include "client/cli/flags.h"
 #include "core/common/intrinsics_io.h"
@@ -220,7 +221,7 @@ int RunRun(int argc, char** argv) {
                  "while waiting to initialise, extend a one-frame IPPP pair too short to decide "
                  "the motion by the next frames up to this span; 0 = off (docs/METHOD.md)")
       ->type_name("S")
-      ->check(CLI::Range(0.0, 5.0))
+      ->check(CLI::Range(0.0, api::kMaxInitBaselineS))
       ->capture_default_str();
   bool quiet = false;
   app.add_flag("--quiet", quiet, "no progress line");

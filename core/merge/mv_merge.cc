@@ -129,13 +129,14 @@ void SegmentMerger::Reset() {
   extend_next_ = false;
 }
 
-void SegmentMerger::ExtendChain(AnchorPair pair) {
+bool SegmentMerger::ExtendChain(AnchorPair pair) {
   if (!earlier_.has_value() || pair.later_index != earlier_->index ||
       pair.correspondences.empty()) {
-    return;
+    return false;
   }
   chain_ = std::move(pair);
   extend_next_ = true;
+  return true;
 }
 
 int SegmentMerger::CellOf(const Eigen::Vector2d& x_px) const {
@@ -161,11 +162,10 @@ std::optional<AnchorPair> SegmentMerger::Push(const FrameRecord& frame) {
   if (!IsAnchor(frame.type)) return std::nullopt;
   std::optional<AnchorPair> pair;
   if (earlier_.has_value()) pair = Build(frame);
-  const bool chainable = pair.has_value() && frame.type == PictureType::kP &&
-                         b_frames_.empty() &&
-                         (extend_next_ || (options_.chain_min_frames > 1 &&
-                                           pair->later_index - pair->earlier_index <
-                                               options_.chain_min_frames));
+  const bool chainable =
+      pair.has_value() && frame.type == PictureType::kP && b_frames_.empty() &&
+      (extend_next_ || (options_.chain_min_frames > 1 &&
+                        pair->later_index - pair->earlier_index < options_.chain_min_frames));
   if (chainable) {
     pair = Chain(std::move(*pair));
   } else {

@@ -122,7 +122,8 @@ class SegmentMerger {
   // initialise on). Ignored unless `pair` ends at the current anchor and has
   // correspondences (a pair into an I frame has none: nothing to compose
   // onto); an unchainable next segment (B frames, an I frame) starts afresh.
-  void ExtendChain(AnchorPair pair);
+  // Returns whether `pair` was taken.
+  bool ExtendChain(AnchorPair pair);
 
   bool b_pyramid_seen() const { return b_pyramid_seen_; }
   int mb_cols() const { return mb_cols_; }

@@ -40,7 +40,7 @@ struct FrontEndTimes {
 // One anchor pair through the front end.
 struct FrontEndStep {
   AnchorPair pair;
-  StatusOr<InfinityResult> infinity = InfinityResult();       // motion and kept correspondences
+  StatusOr<InfinityResult> infinity = InfinityResult();  // motion and kept correspondences
   StatusOr<PlaneExtractionResult> extraction = PlaneExtractionResult();
   FrontEndTimes times;
 };
@@ -59,8 +59,9 @@ class FrontEnd {
   void Reset();
 
   // `pair` (the last step's) had too short a baseline: the next one-frame P
-  // pair is composed onto it and emitted at once (SegmentMerger::ExtendChain).
-  void ExtendBaseline(const AnchorPair& pair) { merger_.ExtendChain(pair); }
+  // pair is composed onto it and emitted at once (SegmentMerger::ExtendChain;
+  // false: `pair` cannot be extended).
+  bool ExtendBaseline(const AnchorPair& pair) { return merger_.ExtendChain(pair); }
 
   const Intrinsics& intrinsics() const { return intrinsics_; }
   // The extractor's learnt vertical (PlaneExtractor::vertical_down).

@@ -102,11 +102,8 @@ PipelineStep Pipeline::Process(const FrontEndStep& front) {
     step.note = "anchor timestamps do not increase";
   } else if (!ekf_.initialized()) {
     Initialise(front, observations, dt_s, &step);
-    if (!step.tracking && !pair.correspondences.empty() && front.infinity.ok() &&
-        BaselineTooShort(*front.infinity) && dt_s < options_.init_max_baseline_s) {
-      extend_baseline = true;
-      front_end_.ExtendBaseline(pair);
-    }
+    extend_baseline = !step.tracking && front.infinity.ok() && BaselineTooShort(*front.infinity) &&
+                      dt_s < options_.init_max_baseline_s && front_end_.ExtendBaseline(pair);
   } else {
     Advance(front, observations, dt_s, &step);
   }
