@@ -181,7 +181,7 @@ void CountParallaxBands(const MotionProblem& p, const Eigen::Matrix3d* R_rot,
 // rotation-only RANSAC): the fast path never decides "no motion", so the
 // degenerate cases keep the full logic. With the fast path, e_inlier_mask holds
 // the Sampson inliers of the refined motion and num_cheirality_inliers comes
-// from CountCheirality (recoverPose's test, own triangulation).
+// from CountCheirality (recoverPose's test and triangulation).
 // Returns true when it was accepted and filled `result`.
 constexpr double kMinParallaxCheiralityShare = 0.75;
 
@@ -229,10 +229,44 @@ bool SeededFastPath(const MotionProblem& p, const PairMotionPrior& prior,
   return true;
 }
 
+// cv::recoverPose's choice among the four motions an essential matrix allows,
+// (R1 or R2, +t or -t) from cv::decomposeEssentialMat: the one with the most
+// E-inliers in front of both cameras within 50 baselines, the first in that
+// order on a tie. The count is CountCheirality's: recoverPose's test and
+// triangulation in closed form, where recoverPose's 4x4 SVD per point and
+// candidate had cost a third of the pipeline on H.264 IPPP streams
+// (docs/BENCHMARKS.md). Returns the count.
+int ChooseMotionOfE(const MotionProblem& p, const cv::Mat& E, const std::vector<char>& e_mask,
+                    Eigen::Matrix3d* R_e, Eigen::Vector3d* t_e) {
+  cv::Mat R1_cv, R2_cv, t_cv;
+  cv::decomposeEssentialMat(E, R1_cv, R2_cv, t_cv);
+  Eigen::Matrix3d R1, R2;
+  Eigen::Vector3d t;
+  for (int r = 0; r < 3; ++r) {
+    t(r) = t_cv.at<double>(r);
+    for (int c = 0; c < 3; ++c) {
+      R1(r, c) = R1_cv.at<double>(r, c);
+      R2(r, c) = R2_cv.at<double>(r, c);
+    }
+  }
+  const std::pair<const Eigen::Matrix3d*, double> candidates[] = {
+      {&R1, 1.0}, {&R2, 1.0}, {&R1, -1.0}, {&R2, -1.0}};
+  int best = -1;
+  for (const auto& [R, sign] : candidates) {
+    const int count = CountCheirality(p.rays_earlier, p.rays_later, Rigid3d(*R, sign * t), e_mask);
+    if (count > best) {
+      best = count;
+      *R_e = *R;
+      *t_e = sign * t;
+    }
+  }
+  return best;
+}
+
 // Full path, the essential matrix (EstimatePairMotion without a prior, or
 // when the prior is refused):
 //   cv::findEssentialMat(x_earlier, x_later, K, cv::USAC_MAGSAC, confidence,
-//   ransac_threshold_px) and cv::recoverPose (cheirality), which give
+//   ransac_threshold_px) and recoverPose's choice of motion (ChooseMotionOfE), which give
 //   later_from_earlier with |t| = 1. Pixels go in directly with K; OpenCV turns
 //   the threshold into normalised units by the mean focal length. USAC_MAGSAC,
 //   not cv::RANSAC: the latter returns a minimal-sample E, whose R is off by
@@ -268,16 +302,8 @@ Status EssentialMotion(const MotionProblem& p, PairMotionReport* result, bool* h
         result->e_inlier_mask[i] = e_mask.at<uchar>(i) != 0 ? 1 : 0;
         result->num_e_inliers += result->e_inlier_mask[i];
       }
-      cv::Mat pose_mask = e_mask.clone();
-      cv::Mat R_cv, t_cv;
       result->num_cheirality_inliers =
-          cv::recoverPose(E.rowRange(0, 3), pts_earlier, pts_later, K_cv, R_cv, t_cv, pose_mask);
-      R_cv.convertTo(R_cv, CV_64F);
-      t_cv.convertTo(t_cv, CV_64F);
-      for (int r = 0; r < 3; ++r) {
-        (*t_e)(r) = t_cv.at<double>(r);
-        for (int c = 0; c < 3; ++c) (*R_e)(r, c) = R_cv.at<double>(r, c);
-      }
+          ChooseMotionOfE(p, E.rowRange(0, 3), result->e_inlier_mask, R_e, t_e);
       *have_e = R_e->allFinite() && t_e->allFinite() && t_e->norm() > 0.0;
     }
   } catch (const cv::Exception& e) {

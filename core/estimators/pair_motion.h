@@ -15,7 +15,7 @@
 //
 // The estimate (EstimatePairMotion; details above each part in pair_motion.cc):
 //  - full path: the essential matrix by USAC_MAGSAC with recoverPose's
-//    cheirality (the motion then polished by RefineRelativePose, as the fast
+//    cheirality (CountCheirality) (the motion then polished by RefineRelativePose, as the fast
 //    path's), and a rotation-only model by our Ransac<>; translation counts
 //    as observed (has_motion) only when enough E-inliers carry parallax that
 //    the rotation-only model cannot explain, else the rotation-only model (or
@@ -91,7 +91,7 @@ struct PairMotionReport {
   Eigen::Matrix3d R_later_from_earlier = Eigen::Matrix3d::Identity();
   std::vector<char> e_inlier_mask;  // per correspondence; all 0 when E was not estimated
   int num_e_inliers = 0;
-  int num_cheirality_inliers = 0;  // points recoverPose triangulated in front of both cameras
+  int num_cheirality_inliers = 0;  // E-inliers in front of both cameras (CountCheirality)
   int num_rotation_outliers = 0;   // points off the rotation-only model by >= min parallax
   int num_parallax_inliers = 0;    // ... of which E-inliers
   // Full path with an E: rotation-only outliers within ransac_threshold_px

@@ -186,20 +186,35 @@ int CountCheirality(const std::vector<Eigen::Vector3d>& rays_earlier,
   int count = 0;
   for (size_t i = 0; i < rays_earlier.size(); ++i) {
     if (!mask.empty() && !mask[i]) continue;
-    // z_l x_l - z_e (R x_e) = t in least squares: with u = R x_e, v = x_l,
-    // [u.u  -u.v; -u.v  v.v] [z_e; z_l] = [-u.t; v.t].
-    const Eigen::Vector3d u = R * rays_earlier[i];
-    const Eigen::Vector3d& v = rays_later[i];
-    const double uu = u.dot(u), uv = u.dot(v), vv = v.dot(v);
-    const double det = uu * vv - uv * uv;
-    if (!(det > 1e-18 * uu * vv)) continue;  // parallel rays: no depth
-    const double ut = u.dot(t), vt = v.dot(t);
-    const double z_e = (-ut * vv + uv * vt) / det;
-    const double z_l = (uu * vt - uv * ut) / det;
-    // Depths along z: the rays have z = 1 (x_l) and z = (R x_e)_z * z_e in the later frame.
-    const double depth_e = z_e * rays_earlier[i].z();
-    const double depth_l = z_l * v.z();
-    if (depth_e > 0.0 && depth_l > 0.0 && depth_e < max_depth && depth_l < max_depth) ++count;
+    // The point X = (z x_e, w) on the earlier ray (homogeneous, earlier
+    // camera's frame). The later image point (x1, y1) = x_l / x_l.z gives
+    // the linear-triangulation rows
+    //   x1 (R X)_3 - (R X)_1 = a1 z + b1 w = 0,  y1 (R X)_3 - (R X)_2 = a2 z + b2 w = 0,
+    // solved for (z, w) in least squares with |X| = 1: with z' = z |x_e|, the
+    // smallest eigenvector of the 2x2 Gram matrix G of [a / |x_e|, b].
+    const Eigen::Vector3d& x_e = rays_earlier[i];
+    const Eigen::Vector3d u = R * x_e;
+    const double x1 = rays_later[i].x() / rays_later[i].z();
+    const double y1 = rays_later[i].y() / rays_later[i].z();
+    const double norm_e = x_e.norm();
+    const double a1 = (x1 * u.z() - u.x()) / norm_e, b1 = x1 * t.z() - t.x();
+    const double a2 = (y1 * u.z() - u.y()) / norm_e, b2 = y1 * t.z() - t.y();
+    const double g11 = a1 * a1 + a2 * a2, g12 = a1 * b1 + a2 * b2, g22 = b1 * b1 + b2 * b2;
+    const double lambda_min =
+        0.5 * (g11 + g22 - std::sqrt((g11 - g22) * (g11 - g22) + 4.0 * g12 * g12));
+    // Two expressions of the eigenvector; the longer is the better conditioned.
+    double z = g12, w = lambda_min - g11;
+    if (std::abs(lambda_min - g22) + std::abs(g12) > std::abs(z) + std::abs(w)) {
+      z = lambda_min - g22;
+      w = g12;
+    }
+    z /= norm_e;
+    // In front of the earlier camera (depth z x_e.z / w > 0) and of the later one.
+    if (!(z * w * x_e.z() > 0.0)) continue;
+    const double ray_depth = z / w;
+    const double depth_e = ray_depth * x_e.z();
+    const double depth_l = (ray_depth * u + t).z();
+    if (depth_e < max_depth && depth_l > 0.0 && depth_l < max_depth) ++count;
   }
   return count;
 }
