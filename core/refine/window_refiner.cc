@@ -11,6 +11,7 @@
 #include <ceres/rotation.h>
 
 #include "core/common/angles.h"
+#include "core/refine/plane_transfer_cost.h"
 
 namespace slapse {
 namespace {
@@ -20,52 +21,13 @@ using Vec3 = Eigen::Matrix<T, 3, 1>;
 template <typename T>
 using Mat3 = Eigen::Matrix<T, 3, 3>;
 
-// Plane-induced transfer of one plane's macroblocks in one pair (the
-// header's residual), one cost block per (pair, plane) so that the pose and
-// plane algebra is done once for all its macroblocks. Parameter blocks:
-// earlier pose (q, c), later pose (q, c), the plane pi_r in the window's
-// oldest camera r (world_from_r = (R_wr, c_wr), constant data).
-//   R = R_a^T R_b, t = R_a^T (c_b - c_a)                 (a_from_b)
-//   R_rb = R_wr^T R_b, t_rb = R_wr^T (c_b - c_wr)          (r_from_b)
-//   pi_b = R_rb^T pi_r / (1 - pi_r^T t_rb)
-//   H = R + t pi_b^T;  X_a = H y,  y = K^-1 [x_b; 1]
-//   r_j = w_j ([fx X_a.x / X_a.z + cx, fy X_a.y / X_a.z + cy] - x_a) / s_j
-// w_j: the Huber weight sqrt(min(1, k / |r_j|)) of the macroblock's
-// normalised residual at the start of the solve (one IRLS step per solve;
-// the window is solved again at every anchor, so the weights follow).
-struct PlaneBlockResidual {
-  struct Mb {
-    Eigen::Vector3d ray;  // K^-1 [x_later; 1]
-    Eigen::Vector2d x_earlier;
-    double scale = 1.0;  // w / s
-  };
-
-  template <typename T>
-  bool operator()(const T* q_a, const T* c_a, const T* q_b, const T* c_b, const T* pi_r,
-                  T* residual) const {
-    const Eigen::Map<const Eigen::Quaternion<T>> qa(q_a), qb(q_b);
-    const Eigen::Map<const Vec3<T>> ca(c_a), cb(c_b), pir(pi_r);
-    const Mat3<T> Ra = qa.toRotationMatrix(), Rb = qb.toRotationMatrix();
-    const Vec3<T> t = Ra.transpose() * (cb - ca);
-    const Mat3<T> R_rb = R_rw.cast<T>() * Rb;
-    const Vec3<T> t_rb = R_rw.cast<T>() * (cb - c_wr.cast<T>());
-    const Vec3<T> pi_b = R_rb.transpose() * pir / (T(1.0) - pir.dot(t_rb));
-    const Mat3<T> H = Ra.transpose() * Rb + t * pi_b.transpose();
-    for (size_t j = 0; j < mbs.size(); ++j) {
-      const Vec3<T> X = H * mbs[j].ray.cast<T>();
-      if (!(X.z() > T(1e-9))) return false;
-      residual[2 * j] = (T(fx) * X.x() / X.z() + T(cx - mbs[j].x_earlier.x())) * T(mbs[j].scale);
-      residual[2 * j + 1] =
-          (T(fy) * X.y() / X.z() + T(cy - mbs[j].x_earlier.y())) * T(mbs[j].scale);
-    }
-    return true;
-  }
-
-  std::vector<Mb> mbs;
-  double fx = 0, fy = 0, cx = 0, cy = 0;
-  Eigen::Matrix3d R_rw;
-  Eigen::Vector3d c_wr;
-};
+// The plane-induced transfer of one plane's macroblocks in one pair is
+// core/refine/plane_transfer_cost.h (PlaneTransferCost), one cost block per
+// (pair, plane) so that the pose and plane algebra is done once for all its
+// macroblocks. The macroblock weights s_j there are 1 / sigma_j times the
+// Huber weight sqrt(min(1, k / |r_j|)) of the macroblock's normalised
+// residual at the start of the solve (one IRLS step per solve; the window is
+// solved again at every anchor, so the weights follow).
 
 // Motion prior over three consecutive anchors a, b, c (gauge (d)):
 //   v_1 = R_a^T (c_b - c_a) / dt_1,  v_2 = R_b^T (c_c - c_b) / dt_2   (body frame)
@@ -336,30 +298,29 @@ void WindowRefiner::AddTransferResiduals(Problem* problem, size_t first,
     for (const WindowPlaneObservation& o : anchors_[k].observations) {
       auto plane = wp.pis.find(o.plane_id);
       if (plane == wp.pis.end()) continue;
-      auto f = std::make_unique<PlaneBlockResidual>();
-      f->fx = intrinsics_.fx_px;
-      f->fy = intrinsics_.fy_px;
-      f->cx = intrinsics_.cx_px;
-      f->cy = intrinsics_.cy_px;
-      f->R_rw = anchors_[0].world_from_cam.R().transpose();
-      f->c_wr = anchors_[0].world_from_cam.translation;
+      PlaneTransferResidual f;
+      f.data.fx = intrinsics_.fx_px;
+      f.data.fy = intrinsics_.fy_px;
+      f.data.cx = intrinsics_.cx_px;
+      f.data.cy = intrinsics_.cy_px;
+      f.data.R_rw = anchors_[0].world_from_cam.R().transpose();
+      f.data.c_wr = anchors_[0].world_from_cam.translation;
       const size_t m = o.x_later_px.size();
       const size_t stride =
           std::max<size_t>(1, (m + options_.max_mbs_per_plane - 1) / options_.max_mbs_per_plane);
+      std::vector<PlaneTransferData::Mb> all;
       for (size_t i = 0; i < m; i += stride) {
         const double sigma =
             std::sqrt(o.variance_px2[i] + options_.extra_sigma_px * options_.extra_sigma_px);
-        f->mbs.push_back({K_inv * o.x_later_px[i].homogeneous(), o.x_earlier_px[i], 1.0 / sigma});
+        all.push_back({K_inv * o.x_later_px[i].homogeneous(), o.x_earlier_px[i], 1.0 / sigma});
       }
       // Huber weights at the start; macroblocks behind a camera there are dropped.
-      std::vector<PlaneBlockResidual::Mb> kept, all;
-      std::swap(all, f->mbs);
-      PlaneBlockResidual one = *f;  // the pose data, one macroblock at a time
-      for (const PlaneBlockResidual::Mb& mb : all) {
-        one.mbs = {mb};
+      std::vector<PlaneTransferData::Mb> kept;
+      for (const PlaneTransferData::Mb& mb : all) {
+        f.data.mbs = {mb};
         double r1[2];
-        if (!one(a.q.coeffs().data(), a.c.data(), b.q.coeffs().data(), b.c.data(),
-                 plane->second.data(), r1)) {
+        if (!f(a.q.coeffs().data(), a.c.data(), b.q.coeffs().data(), b.c.data(),
+               plane->second.data(), r1)) {
           continue;
         }
         const double norm = std::hypot(r1[0], r1[1]);
@@ -367,14 +328,11 @@ void WindowRefiner::AddTransferResiduals(Problem* problem, size_t first,
         kept.back().scale *= norm > options_.huber_k ? std::sqrt(options_.huber_k / norm) : 1.0;
       }
       if (kept.empty()) continue;
-      f->mbs = std::move(kept);
-      const int num_residuals = 2 * static_cast<int>(f->mbs.size());
-      wp.residuals += num_residuals / 2;
-      wp.problem.AddResidualBlock(
-          new ceres::AutoDiffCostFunction<PlaneBlockResidual, ceres::DYNAMIC, 4, 3, 4, 3, 3>(
-              f.release(), num_residuals),
-          nullptr, a.q.coeffs().data(), a.c.data(), b.q.coeffs().data(), b.c.data(),
-          plane->second.data());
+      f.data.mbs = std::move(kept);
+      wp.residuals += static_cast<int>(f.data.mbs.size());
+      wp.problem.AddResidualBlock(new PlaneTransferCost(std::move(f.data)), nullptr,
+                                  a.q.coeffs().data(), a.c.data(), b.q.coeffs().data(), b.c.data(),
+                                  plane->second.data());
       road_seen = road_seen || o.plane_id == road_id_;
     }
     rep->road_pairs += road_seen ? 1 : 0;
