@@ -29,8 +29,13 @@
 //     frame_received_time (when the server's reader delivered the anchor frame),
 //     same clock. Frames queued in the socket before the reader are not in it
 //     (lag_ms shows those).
+//   - server CPU per stream second: the process's CPU time (server, ingest,
+//     watchers; not the ffmpeg publishers, separate processes) over the stream
+//     seconds all sessions processed, and the sessions the machine's CPUs
+//     would keep at that cost (an upper bound: it ignores contention).
 // Timing lives here, never in tests.
 #include <signal.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -207,6 +212,13 @@ Status CreateSessions(slapse::client::SlapseClient* client, const RunConfig& c,
   return Status();
 }
 
+// This process's CPU time (user + system, all threads), seconds.
+double ProcessCpuS() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return u.ru_utime.tv_sec + u.ru_stime.tv_sec + 1e-6 * (u.ru_utime.tv_usec + u.ru_stime.tv_usec);
+}
+
 // Samples every session's statistics and the process's memory until all end.
 std::vector<MemorySample> SampleUntilEnd(slapse::client::SlapseClient* client,
                                          std::vector<SessionOutcome>* out) {
@@ -234,7 +246,7 @@ std::vector<MemorySample> SampleUntilEnd(slapse::client::SlapseClient* client,
 
 // Prints one "session ..." line per session and the "run ..." line.
 void Report(const RunConfig& c, const std::vector<SessionOutcome>& out, long idle_rss_kb,
-            long idle_anon_kb, const MemoryFigures& m) {
+            long idle_anon_kb, const MemoryFigures& m, double server_cpu_s) {
   std::vector<double> all_lat, all_emit;
   int keeping_up = 0;
   for (const SessionOutcome& s : out) {
@@ -253,15 +265,26 @@ void Report(const RunConfig& c, const std::vector<SessionOutcome>& out, long idl
   }
   const int n = c.sessions;
   const double idle_mib = idle_rss_kb / 1024.0;
+  // Server CPU per second of live stream: this process's CPU time (server,
+  // its ingest and the watchers; not the ffmpeg publishers, which are other
+  // processes) over the stream time all sessions processed. The sessions one
+  // server keeps at that cost: the CPUs over it.
+  double stream_s = 0;
+  for (const SessionOutcome& s : out) stream_s += s.final.stats().stream_time_s();
+  const double cpu_per_stream_s = stream_s > 0 ? server_cpu_s / stream_s : 0;
+  const double sessions_at_cost =
+      cpu_per_stream_s > 0 ? sysconf(_SC_NPROCESSORS_ONLN) / cpu_per_stream_s : 0;
   std::printf(
       "run sessions %d kept_up %d idle_rss_mib %.1f peak_rss_mib %.1f steady_rss_mib %.1f "
       "rss_per_session_mib %.1f steady_per_session_mib %.1f anon_per_session_mib %.1f "
       "slope_mib_per_h %.1f latency_p50_ms %.1f latency_p95_ms %.1f latency_max_ms %.1f "
-      "emit_to_client_p50_ms %.2f\n",
+      "emit_to_client_p50_ms %.2f server_cpu_s %.1f stream_s %.1f cpu_per_stream_s %.3f "
+      "sessions_at_cost %.1f\n",
       n, keeping_up, idle_mib, m.peak_mib, m.steady_mib, (m.peak_mib - idle_mib) / n,
       (m.steady_mib - idle_mib) / n, (m.steady_anon_mib - idle_anon_kb / 1024.0) / n,
       m.slope_mib_per_h, Percentile(all_lat, 0.5), Percentile(all_lat, 0.95),
-      Percentile(all_lat, 1.0), Percentile(all_emit, 0.5));
+      Percentile(all_lat, 1.0), Percentile(all_emit, 0.5), server_cpu_s, stream_s, cpu_per_stream_s,
+      sessions_at_cost);
   std::fflush(stdout);
 }
 
@@ -292,6 +315,7 @@ int RunChild(const RunConfig& c, const slapse::Intrinsics& k) {
 
   std::vector<SessionOutcome> out(c.sessions);
   std::vector<std::string> urls;
+  const double cpu0_s = ProcessCpuS();
   if (Status s = CreateSessions(client.get(), c, k, &out, &urls); !s.ok()) {
     std::fprintf(stderr, "service_bench: create: %s\n", s.ToString().c_str());
     return 1;
@@ -330,13 +354,14 @@ int RunChild(const RunConfig& c, const slapse::Intrinsics& k) {
   }
 
   const std::vector<MemorySample> samples = SampleUntilEnd(client.get(), &out);
+  const double server_cpu_s = ProcessCpuS() - cpu0_s;
   for (std::thread& t : threads) t.join();
   for (pid_t pid : publishers) {
     if (pid > 0) waitpid(pid, nullptr, 0);
   }
   (*server)->Shutdown();
   std::filesystem::remove_all(data_dir);
-  Report(c, out, idle_rss_kb, idle_anon_kb, Summarize(samples, c.warmup_s));
+  Report(c, out, idle_rss_kb, idle_anon_kb, Summarize(samples, c.warmup_s), server_cpu_s);
   return 0;
 }
 
@@ -363,8 +388,9 @@ int RunParent(const std::string& sessions, const RunConfig& c, const slapse::Int
       sysconf(_SC_NPROCESSORS_ONLN), load[0], c.max_lag_ms, c.warmup_s);
   std::printf(
       "| sessions | keep up | fps per session | max lag_ms per session | RSS idle | "
-      "RSS per session: peak / steady / anon | RSS slope | update latency p50 / p95 / max |\n");
-  std::printf("|---:|---:|---|---|---:|---:|---:|---:|\n");
+      "RSS per session: peak / steady / anon | RSS slope | update latency p50 / p95 / max | "
+      "server CPU per stream second | sessions at that cost |\n");
+  std::printf("|---:|---:|---|---|---:|---:|---:|---:|---:|---:|\n");
   char self[4096];
   const ssize_t len = readlink("/proc/self/exe", self, sizeof(self) - 1);
   if (len <= 0) return 1;
@@ -394,16 +420,18 @@ int RunParent(const std::string& sessions, const RunConfig& c, const slapse::Int
       }
     }
     if (pclose(p) != 0 || run.empty()) {
-      std::printf("| %d | run failed | | | | | | |\n", n);
+      std::printf("| %d | run failed | | | | | | | | |\n", n);
       continue;
     }
     std::printf(
-        "| %d | %s of %d | %s | %s | %s MiB | %s / %s / %s MiB | %s MiB/h | %s / %s / %s ms |\n", n,
-        Field(run, "kept_up").c_str(), n, fps.c_str(), lags.c_str(),
+        "| %d | %s of %d | %s | %s | %s MiB | %s / %s / %s MiB | %s MiB/h | %s / %s / %s ms | %s s "
+        "| %s |\n",
+        n, Field(run, "kept_up").c_str(), n, fps.c_str(), lags.c_str(),
         Field(run, "idle_rss_mib").c_str(), Field(run, "rss_per_session_mib").c_str(),
         Field(run, "steady_per_session_mib").c_str(), Field(run, "anon_per_session_mib").c_str(),
         Field(run, "slope_mib_per_h").c_str(), Field(run, "latency_p50_ms").c_str(),
-        Field(run, "latency_p95_ms").c_str(), Field(run, "latency_max_ms").c_str());
+        Field(run, "latency_p95_ms").c_str(), Field(run, "latency_max_ms").c_str(),
+        Field(run, "cpu_per_stream_s").c_str(), Field(run, "sessions_at_cost").c_str());
     std::fflush(stdout);
   }
   return 0;
