@@ -259,7 +259,7 @@ class PlaneExtractor {
   void LearnVertical(const PlaneExtractionResult& result);
   static double TrackChange(const Eigen::Vector3d& m_remembered, const Eigen::Vector3d& m_later,
                             const PairMotion& motion);
-  int MinMbs(const PairFit& fit) const;  // MBs a plane needs
+  int MinMbs(const PairFit& fit) const;                   // MBs a plane needs
   bool IsRoad(const ExtractedPlane& plane) const;         // m_later set and non-zero
   bool OrientationOk(const ExtractedPlane& plane) const;  // the street-scene prior
 
