@@ -34,8 +34,9 @@ namespace {
 // appsink's callbacks (OnNewSample) feed the session's byte queue; max-buffers
 // and drop bound what a refused second publisher's pipeline could hold.
 // alignment=7: 7 TS packets (1316 bytes) per buffer. mpegtsmux's default
-// pushed each 188-byte packet on its own, a sample, a copy and a wake-up of
-// the reader each: ~7900 per second for a 12 Mbit/s camera. The server's CPU
+// pushed each 188-byte packet on its own, a sample, a copy and a byte-queue
+// write each: 157 551 samples for a 20 s 12 Mbit/s camera, 22 508 with 7
+// (counted in OnNewSample). The server's CPU
 // per stream second (service_bench, 4 sessions, runs alternated) went
 // 0.233 / 0.225 -> 0.226 / 0.212 s; larger buffers would hold a low-bitrate
 // camera's last packets longer (docs/BENCHMARKS.md).
