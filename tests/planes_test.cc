@@ -109,6 +109,9 @@ SyntheticPair MakePair(const Rigid3d& earlier_from_world, const Rigid3d& later_f
   SyntheticPair s;
   s.pair.earlier_index = earlier_index;
   s.pair.later_index = earlier_index + 1;
+  // Anchors 4 frames apart at 30 fps, as an IBBBP stream's.
+  s.pair.earlier_timestamp_s = earlier_index * 4 / 30.0;
+  s.pair.later_timestamp_s = (earlier_index + 1) * 4 / 30.0;
   s.pair.mb_cols = kCols;
   s.pair.mb_rows = kRows;
   s.later_from_earlier = later_from_world * earlier_from_world.Inverse();
@@ -834,6 +837,9 @@ SyntheticPair MakeBandPair(int64_t earlier_index, const Eigen::Vector2d& pan_px,
   SyntheticPair s;
   s.pair.earlier_index = earlier_index;
   s.pair.later_index = earlier_index + 1;
+  // Anchors 4 frames apart at 30 fps, as an IBBBP stream's.
+  s.pair.earlier_timestamp_s = earlier_index * 4 / 30.0;
+  s.pair.later_timestamp_s = (earlier_index + 1) * 4 / 30.0;
   s.pair.mb_cols = kCols;
   s.pair.mb_rows = kRows;
   for (int r = 0; r < kRows; ++r) {
@@ -1147,6 +1153,68 @@ TEST(PlaneExtractorTest, ConnectivitySplitsDisjointPatchesOfOneHomography) {
   ASSERT_TRUE(result.ok());
   ASSERT_EQ(result->planes.size(), 1u);
   EXPECT_EQ(result->planes[0].mb_indices.size(), big.size() + small.size());
+}
+
+// min_discovery_interval_s: a pair that tracked a plane discovers at most
+// that often (stream time); one without a tracked plane always does.
+TEST(PlaneExtractorTest, DiscoveryRunsAtMostEveryIntervalWhileTracking) {
+  const std::vector<int> old_cells = Rect(22, 33, 18, 22), new_cells = Rect(2, 9, 18, 21);
+  // Consecutive 30 fps pairs (anchor k -> k + 1): the first shows one plane,
+  // the later ones also a second surface that moves differently.
+  auto make_pair = [&](int64_t earlier, bool with_new) {
+    AnchorPair pair = EmptyGridPair();
+    pair.earlier_index = earlier;
+    pair.later_index = earlier + 1;
+    pair.earlier_timestamp_s = earlier / 30.0;
+    pair.later_timestamp_s = (earlier + 1) / 30.0;
+    AddPatch(ExampleHomography(0.5), old_cells, &pair);
+    if (with_new) AddPatch(ExampleHomography(-9.0), new_cells, &pair);
+    return pair;
+  };
+  auto planes_of = [](PlaneExtractor* extractor, const AnchorPair& pair) {
+    auto result = extractor->Process(pair, AllIndices(pair));
+    EXPECT_TRUE(result.ok()) << result.status().ToString();
+    return result.ok() ? *result : PlaneExtractionResult{};
+  };
+
+  PlaneExtractionOptions options;
+  ASSERT_DOUBLE_EQ(options.min_discovery_interval_s, 0.1);
+  PlaneExtractor extractor(options);
+  // Pair 0 -> 1 (t = 0.033 s) discovers the first plane.
+  ASSERT_EQ(planes_of(&extractor, make_pair(0, false)).planes.size(), 1u);
+  // Pairs ending at 0.067 and 0.1 s track it only: the new surface's points
+  // stay unassigned.
+  for (int64_t k : {1, 2}) {
+    const PlaneExtractionResult r = planes_of(&extractor, make_pair(k, true));
+    ASSERT_EQ(r.planes.size(), 1u) << "pair " << k;
+    EXPECT_TRUE(r.planes[0].tracked);
+    EXPECT_EQ(r.unassigned_indices.size(), new_cells.size());
+  }
+  // 0.133 s: 0.1 s after the last discovery, the new surface is found.
+  const PlaneExtractionResult due = planes_of(&extractor, make_pair(3, true));
+  ASSERT_EQ(due.planes.size(), 2u);
+  EXPECT_TRUE(due.planes[0].tracked);
+  EXPECT_FALSE(due.planes[1].tracked);
+  EXPECT_EQ(due.planes[1].mb_indices.size(), new_cells.size());
+
+  // 0: every pair discovers.
+  options.min_discovery_interval_s = 0.0;
+  PlaneExtractor every(options);
+  ASSERT_EQ(planes_of(&every, make_pair(0, false)).planes.size(), 1u);
+  EXPECT_EQ(planes_of(&every, make_pair(1, true)).planes.size(), 2u);
+
+  // Without a tracked plane (a pair that does not continue the last one) a
+  // pair discovers whenever it comes; timestamps that go back (a restarted
+  // stream) do not postpone discovery.
+  PlaneExtractor gap(PlaneExtractionOptions{});
+  ASSERT_EQ(planes_of(&gap, make_pair(0, false)).planes.size(), 1u);
+  EXPECT_EQ(planes_of(&gap, make_pair(5, true)).planes.size(), 2u);
+  PlaneExtractor restarted(PlaneExtractionOptions{});
+  ASSERT_EQ(planes_of(&restarted, make_pair(90, false)).planes.size(), 1u);
+  AnchorPair back = make_pair(91, true);
+  back.earlier_timestamp_s = 0.0;
+  back.later_timestamp_s = 1.0 / 30.0;
+  EXPECT_EQ(planes_of(&restarted, back).planes.size(), 2u);
 }
 
 TEST(PlaneExtractorTest, PeelsIsolatedBlocksAndSpurs) {

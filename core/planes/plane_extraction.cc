@@ -283,6 +283,16 @@ void PlaneExtractor::Reset() {
   tracks_.clear();
   has_previous_ = false;
   last_later_index_ = -1;
+  last_discovery_s_ = -1.0;
+}
+
+bool PlaneExtractor::DiscoveryDue(const AnchorPair& pair,
+                                  const PlaneExtractionResult& tracked) const {
+  if (tracked.planes.empty() || last_discovery_s_ < 0) return true;
+  const double since_s = pair.later_timestamp_s - last_discovery_s_;
+  // Timestamps that went back (a restarted stream) do not postpone it. The
+  // margin keeps a 0.1 s interval from missing a 10 fps pair to rounding.
+  return !(since_s >= 0 && since_s < options_.min_discovery_interval_s - 1e-6);
 }
 
 StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
@@ -386,10 +396,10 @@ class PlaneExtractor::PairFit {
       // largest component of the rest (without peeling again).
       HomographyEstimator::Residuals(x_later_, x_earlier_, best.model.H, &sq_residuals);
       const double frac = options_.boundary_residual_frac;
-      best.mask = TrimBoundaryCells(
-          mb_of_, best.mask, sq_residuals, pair_.mb_cols, pair_.mb_rows,
-          frac * frac * max_sq_error_,
-          options_.boundary_ignore_empty ? empty_cells_ : std::vector<char>());
+      best.mask =
+          TrimBoundaryCells(mb_of_, best.mask, sq_residuals, pair_.mb_cols, pair_.mb_rows,
+                            frac * frac * max_sq_error_,
+                            options_.boundary_ignore_empty ? empty_cells_ : std::vector<char>());
       best.mask = LargestComponent(mb_of_, best.mask, pair_.mb_cols, pair_.mb_rows,
                                    options_.connectivity_radius_mbs, empty_cells_,
                                    options_.max_empty_gap_mbs);
@@ -485,7 +495,10 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
   }
   // 2. Discovery of new planes.
   std::vector<int> set_aside;  // inliers of models whose largest component was too small
-  DiscoverPlanes(&fit, &result, &set_aside);
+  if (DiscoveryDue(pair, result)) {
+    DiscoverPlanes(&fit, &result, &set_aside);
+    last_discovery_s_ = pair.later_timestamp_s;
+  }
   result.unassigned_indices = fit.remaining();
   result.unassigned_indices.insert(result.unassigned_indices.end(), set_aside.begin(),
                                    set_aside.end());

@@ -31,7 +31,8 @@
 //     >= min_mbs_per_plane MBs gets a new track_id (never reused, also not after
 //     Reset) and removes its inliers. Stops at max_planes planes (tracked
 //     included), when fewer than 4 correspondences remain, or when the best
-//     model has fewer than min_mbs_per_plane MBs.
+//     model has fewer than min_mbs_per_plane MBs. A pair that tracked a plane
+//     discovers at most every min_discovery_interval_s (beyond the paper).
 //  3. The planes' MB sets (mb_index, later anchor) are remembered for the next pair.
 // Beyond the paper (options below; all off gives the paper's method):
 // consensus sets (steps 1 and 2) are post-processed. Blocks with fewer than
@@ -179,6 +180,20 @@ struct PlaneExtractionOptions {
   // hypothesis is scored on all points only if, on a fixed random set of this
   // many points, it has at least half the best model's inliers. 0: off.
   int ransac_pretest_points = 100;
+  // Discovery (step 2) runs at most this often, stream seconds: a pair that
+  // ends less than this after the last discovering pair's later anchor and
+  // tracked at least one plane only tracks (its other points are
+  // unassigned); without a tracked plane a pair always discovers. A new
+  // surface stays in view for many pairs, and on one-frame IPPP pairs
+  // (30-60 per second) discovery was a quarter of the pipeline's time. 0.1 s
+  // changes nothing where anchors are >= 0.1 s apart (IBBBP up to 30 fps,
+  // IPPP at 10 fps). Tuning drives (`slapse eval-trajectory --drives tuning`,
+  // ATE median / worst, eps_D median), 0 -> 0.1 -> 0.2 s: h264-ippp 0.31 /
+  // 2.76 / 2.03 -> 0.30 / 2.76 / 1.59 -> 0.29 / 2.76 / 1.87 %; mpeg2-ibbbp
+  // 0.28 / 2.02 / 1.84 -> 0.32 / 1.85 / 1.81 -> 0.32 / 1.54 / 1.84 %. Plane
+  // fitting per pair on a 2 Mbit/s H.264 IPPP stream 0.88 -> 0.57 -> 0.52 ms
+  // (docs/BENCHMARKS.md). 0.1: most of the saving, the smaller change.
+  double min_discovery_interval_s = 0.1;
 };
 
 // The relative motion of an anchor pair, when the epipolar geometry was
@@ -256,6 +271,9 @@ class PlaneExtractor {
   void TrackPlanes(const AnchorPair& pair, const PairMotion* motion, PairFit* fit,
                    PlaneExtractionResult* result);
   void DiscoverPlanes(PairFit* fit, PlaneExtractionResult* result, std::vector<int>* set_aside);
+  // Whether `pair`, after tracking `tracked`, runs discovery
+  // (min_discovery_interval_s).
+  bool DiscoveryDue(const AnchorPair& pair, const PlaneExtractionResult& tracked) const;
   void LearnVertical(const PlaneExtractionResult& result);
   static double TrackChange(const Eigen::Vector3d& m_remembered, const Eigen::Vector3d& m_later,
                             const PairMotion& motion);
@@ -271,6 +289,7 @@ class PlaneExtractor {
   bool vertical_learnt_ = false;  // down_ has been refined by a road plane
   int64_t last_later_index_ = -1;
   bool has_previous_ = false;
+  double last_discovery_s_ = -1.0;  // later anchor's timestamp of the last discovery (-1: none)
   int next_track_id_ = 0;
 };
 
