@@ -41,12 +41,10 @@ bool PlaneTransferCost::Evaluate(double const* const* parameters, double* residu
   }
   for (size_t j = 0; j < data_.mbs.size(); ++j) {
     const PlaneTransferData::Mb& mb = data_.mbs[j];
-    const Eigen::Vector3d X = H * mb.ray;
-    if (!(X.z() > 1e-9)) return false;
-    const double inv_z = 1.0 / X.z();
-    residuals[2 * j] = (data_.fx * X.x() * inv_z + (data_.cx - mb.x_earlier.x())) * mb.scale;
-    residuals[2 * j + 1] = (data_.fy * X.y() * inv_z + (data_.cy - mb.x_earlier.y())) * mb.scale;
+    if (!data_.Residual(H, mb, residuals + 2 * j)) return false;
     if (jacobians == nullptr) continue;
+    const Eigen::Vector3d X = H * mb.ray;
+    const double inv_z = 1.0 / X.z();
     // dX/dp, row r: sum_k y_k dH(r, k)/dp.
     Eigen::Matrix<double, 3, kNumParameters, Eigen::RowMajor> dX;
     for (int r = 0; r < 3; ++r) {

@@ -59,22 +59,30 @@ struct PlaneTransferData {
     const Vec3 pi_b = R_rb.transpose() * pir / (T(1.0) - pir.dot(t_rb));
     return Ra.transpose() * Rb + t * pi_b.transpose();
   }
+
+  // The macroblock's residual r_j under H (px * s_j); false when X_a.z <=
+  // 1e-9 (behind the earlier camera). The one home of the transfer: the
+  // cost, its autodiff reference and the refiner's Huber weights use it.
+  template <typename T>
+  bool Residual(const Eigen::Matrix<T, 3, 3>& H, const Mb& mb, T* r) const {
+    const Eigen::Matrix<T, 3, 1> X = H * mb.ray.cast<T>();
+    if (!(X.z() > T(1e-9))) return false;
+    const T inv_z = T(1.0) / X.z();
+    r[0] = (T(fx) * X.x() * inv_z + T(cx - mb.x_earlier.x())) * T(mb.scale);
+    r[1] = (T(fy) * X.y() * inv_z + T(cy - mb.x_earlier.y())) * T(mb.scale);
+    return true;
+  }
 };
 
-// The residual for ceres::AutoDiffCostFunction (the reference the analytic
-// Jacobian is tested against; the refiner uses it for its Huber weights).
+// The residual for ceres::AutoDiffCostFunction: the reference the analytic
+// Jacobian is tested against (refine_test).
 struct PlaneTransferResidual {
   template <typename T>
   bool operator()(const T* q_a, const T* c_a, const T* q_b, const T* c_b, const T* pi_r,
                   T* residual) const {
     const Eigen::Matrix<T, 3, 3> H = data.Homography(q_a, c_a, q_b, c_b, pi_r);
     for (size_t j = 0; j < data.mbs.size(); ++j) {
-      const Eigen::Matrix<T, 3, 1> X = H * data.mbs[j].ray.cast<T>();
-      if (!(X.z() > T(1e-9))) return false;
-      const PlaneTransferData::Mb& mb = data.mbs[j];
-      residual[2 * j] = (T(data.fx) * X.x() / X.z() + T(data.cx - mb.x_earlier.x())) * T(mb.scale);
-      residual[2 * j + 1] =
-          (T(data.fy) * X.y() / X.z() + T(data.cy - mb.x_earlier.y())) * T(mb.scale);
+      if (!data.Residual(H, data.mbs[j], residual + 2 * j)) return false;
     }
     return true;
   }

@@ -303,13 +303,13 @@ void WindowRefiner::AddTransferResiduals(Problem* problem, size_t first,
     for (const WindowPlaneObservation& o : anchors_[k].observations) {
       auto plane = wp.pis.find(o.plane_id);
       if (plane == wp.pis.end()) continue;
-      PlaneTransferResidual f;
-      f.data.fx = intrinsics_.fx_px;
-      f.data.fy = intrinsics_.fy_px;
-      f.data.cx = intrinsics_.cx_px;
-      f.data.cy = intrinsics_.cy_px;
-      f.data.R_rw = anchors_[0].world_from_cam.R().transpose();
-      f.data.c_wr = anchors_[0].world_from_cam.translation;
+      PlaneTransferData data;
+      data.fx = intrinsics_.fx_px;
+      data.fy = intrinsics_.fy_px;
+      data.cx = intrinsics_.cx_px;
+      data.cy = intrinsics_.cy_px;
+      data.R_rw = anchors_[0].world_from_cam.R().transpose();
+      data.c_wr = anchors_[0].world_from_cam.translation;
       const size_t m = o.x_later_px.size();
       const size_t stride =
           std::max<size_t>(1, (m + options_.max_mbs_per_plane - 1) / options_.max_mbs_per_plane);
@@ -320,22 +320,18 @@ void WindowRefiner::AddTransferResiduals(Problem* problem, size_t first,
         all.push_back({K_inv * o.x_later_px[i].homogeneous(), o.x_earlier_px[i], 1.0 / sigma});
       }
       // Huber weights at the start; macroblocks behind a camera there are dropped.
-      std::vector<PlaneTransferData::Mb> kept;
+      const Eigen::Matrix3d H = data.Homography(
+          a.q.coeffs().data(), a.c.data(), b.q.coeffs().data(), b.c.data(), plane->second.data());
       for (const PlaneTransferData::Mb& mb : all) {
-        f.data.mbs = {mb};
         double r1[2];
-        if (!f(a.q.coeffs().data(), a.c.data(), b.q.coeffs().data(), b.c.data(),
-               plane->second.data(), r1)) {
-          continue;
-        }
+        if (!data.Residual(H, mb, r1)) continue;
         const double norm = std::hypot(r1[0], r1[1]);
-        kept.push_back(mb);
-        kept.back().scale *= norm > options_.huber_k ? std::sqrt(options_.huber_k / norm) : 1.0;
+        data.mbs.push_back(mb);
+        data.mbs.back().scale *= norm > options_.huber_k ? std::sqrt(options_.huber_k / norm) : 1.0;
       }
-      if (kept.empty()) continue;
-      f.data.mbs = std::move(kept);
-      wp.residuals += static_cast<int>(f.data.mbs.size());
-      wp.problem.AddResidualBlock(new PlaneTransferCost(std::move(f.data)), nullptr,
+      if (data.mbs.empty()) continue;
+      wp.residuals += static_cast<int>(data.mbs.size());
+      wp.problem.AddResidualBlock(new PlaneTransferCost(std::move(data)), nullptr,
                                   a.q.coeffs().data(), a.c.data(), b.q.coeffs().data(), b.c.data(),
                                   plane->second.data());
       road_seen = road_seen || o.plane_id == road_id_;
