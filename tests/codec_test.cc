@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <string>
 #include <vector>
@@ -365,6 +366,42 @@ TEST(ReferenceTest, BPyramidThreeRefsAreMarkedAndNotMixed) {
       << "consistent " << consistent.wrong << "/" << consistent.correspondences << ", keep "
       << keep.wrong << "/" << keep.correspondences;
   EXPECT_LT(consistent.wrong, 0.05 * consistent.correspondences);
+}
+
+// The low-rate camera preset keeps to its bitrate (VBV cap), where CRF 20
+// spends what the picture asks for.
+TEST(PresetTest, LowRatePresetKeepsTheCamerasBitrate) {
+  auto low = EncoderPreset("h264-baseline-ippp-2s-lowrate", 30.0);
+  ASSERT_TRUE(low.ok());
+  EXPECT_EQ(low->gop_size, 60);
+  EXPECT_EQ(low->b_frames, 0);
+  EXPECT_NEAR(low->h264_bits_per_pixel_s * 640 * 480, 2e6, 1.0);
+  auto crf = EncoderPreset("h264-baseline-ippp-2s", 30.0);
+  ASSERT_TRUE(crf.ok());
+  EXPECT_EQ(crf->h264_bits_per_pixel_s, 0.0);
+  const std::string dir = MakeTempDir("lowrate");
+  constexpr int kFrames = 90;  // 3 s
+  ASSERT_TRUE(WritePan(dir + "/low.ts", *low, kFrames, kVx, kVy).ok());
+  ASSERT_TRUE(WritePan(dir + "/crf.ts", *crf, kFrames, kVx, kVy).ok());
+  const double seconds = kFrames / 30.0;
+  const double low_bps = 8.0 * std::filesystem::file_size(dir + "/low.ts") / seconds;
+  const double crf_bps = 8.0 * std::filesystem::file_size(dir + "/crf.ts") / seconds;
+  const double target_bps = low->h264_bits_per_pixel_s * 320 * 240;  // 0.5 Mbit/s
+  // The MPEG-TS container adds a few percent.
+  EXPECT_LT(low_bps, 1.3 * target_bps) << low_bps;
+  EXPECT_GT(low_bps, 0.5 * target_bps) << low_bps;
+  EXPECT_GT(crf_bps, 1.5 * low_bps) << crf_bps << " vs " << low_bps;
+  // It still reads as H.264 with vectors on every P frame.
+  auto reader = MvReader::Open(dir + "/low.ts");
+  ASSERT_TRUE(reader.ok()) << reader.status().ToString();
+  Status end;
+  const std::vector<FrameRecord> frames = ReadAll(reader->get(), &end);
+  ASSERT_EQ(frames.size(), static_cast<size_t>(kFrames)) << end.ToString();
+  EXPECT_FALSE(frames[1].mvs.empty());
+  EncoderOptions mpeg2_rate;
+  mpeg2_rate.h264_bits_per_pixel_s = 6.5;
+  EXPECT_EQ(VideoEncoder::Open(dir + "/x.ts", 320, 240, mpeg2_rate).status().code(),
+            StatusCode::kInvalidArgument);
 }
 
 TEST(PresetTest, NamesParseAndUnknownNamesListTheChoices) {

@@ -71,6 +71,9 @@ namespace {
 
 constexpr int kPresetGopSecondsChoices[] = {1, 2, 4, 10};
 constexpr char kBaselinePrefix[] = "h264-baseline-ippp-";
+constexpr char kLowRatePreset[] = "h264-baseline-ippp-2s-lowrate";
+// 2 Mbit/s at 640x480.
+constexpr double kCameraBitsPerPixelS = 2e6 / (640.0 * 480.0);
 
 }  // namespace
 
@@ -79,6 +82,7 @@ std::vector<std::string> EncoderPresetNames() {
   for (int s : kPresetGopSecondsChoices) {
     names.push_back(kBaselinePrefix + std::to_string(s) + "s");
   }
+  names.push_back(kLowRatePreset);
   for (const char* n : {"h264-main-bpyr-3ref", "h264-high-bpyr-3ref", "hevc", "vp9", "mjpeg"}) {
     names.push_back(n);
   }
@@ -104,6 +108,14 @@ StatusOr<EncoderOptions> EncoderPreset(const std::string& name, double fps) {
   if (name == "h264-ippp") {
     o.codec = VideoCodec::kH264;
     o.b_frames = 0;
+    return o;
+  }
+  if (name == kLowRatePreset) {
+    o.codec = VideoCodec::kH264;
+    o.h264_profile = "baseline";
+    o.b_frames = 0;
+    o.gop_size = frames_in(2);
+    o.h264_bits_per_pixel_s = kCameraBitsPerPixelS;
     return o;
   }
   if (name.rfind(kBaselinePrefix, 0) == 0) {
@@ -165,6 +177,10 @@ StatusOr<std::unique_ptr<VideoEncoder>> VideoEncoder::Open(const std::string& pa
   if (o.fps <= 0) return InvalidArgumentError("fps must be positive");
   if (o.b_frames < 0 || o.b_frames > 16) return InvalidArgumentError("b_frames must be 0..16");
   if (o.gop_size < 1) return InvalidArgumentError("gop_size must be >= 1");
+  if (o.h264_bits_per_pixel_s < 0 ||
+      (o.h264_bits_per_pixel_s > 0 && o.codec != VideoCodec::kH264)) {
+    return InvalidArgumentError("h264_bits_per_pixel_s must be >= 0, and is for H.264 only");
+  }
   if (o.interlaced && o.codec != VideoCodec::kMpeg2) {
     return InvalidArgumentError(std::string("interlaced encoding is MPEG-2 only, not ") +
                                 VideoCodecName(o.codec));
@@ -195,7 +211,14 @@ StatusOr<std::unique_ptr<VideoEncoder>> VideoEncoder::Open(const std::string& pa
   AVDictionary* opts = nullptr;
   if (o.codec == VideoCodec::kH264) {
     av_dict_set(&opts, "preset", "veryfast", 0);
-    av_dict_set_int(&opts, "crf", o.quality, 0);
+    if (o.h264_bits_per_pixel_s > 0) {
+      // A camera's rate control: the average at the cap, a 1 s buffer.
+      c->bit_rate = std::llround(o.h264_bits_per_pixel_s * width_px * height_px);
+      c->rc_max_rate = c->bit_rate;
+      c->rc_buffer_size = static_cast<int>(c->bit_rate);
+    } else {
+      av_dict_set_int(&opts, "crf", o.quality, 0);
+    }
     // Fixed GOP: no adaptive B placement and no scene cuts; by default no
     // B-pyramid and one reference, so every B frame refers to its two
     // neighbouring anchors (the reading of MVs in docs/METHOD.md, "MV merging").

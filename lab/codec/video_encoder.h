@@ -44,6 +44,10 @@ struct EncoderOptions {
   int h264_refs = 1;
   // H.264 only: profile ("baseline", "main", "high"); empty = x264's choice.
   std::string h264_profile;
+  // H.264 only: a camera's bitrate instead of constant quality: average and
+  // maximum bitrate (VBV, 1 s buffer) of this many bits per pixel and second
+  // (6.5: 2 Mbit/s at 640x480, whatever the frame rate). 0: CRF `quality`.
+  double h264_bits_per_pixel_s = 0.0;
   // MPEG-2 only: an interlaced camera's stream. Interlaced frame pictures,
   // top field first, each macroblock predicted and transformed by frame or by
   // field as the encoder finds cheaper (libavcodec's +ilme+ildct). The
@@ -61,6 +65,9 @@ struct EncoderOptions {
 //   h264-ippp                H.264 IPPP, GOP 12, CRF 20 (the simulator's old --gop IPPP)
 //   h264-baseline-ippp-Ns    H.264 Baseline IPPP, one reference, an I frame every N s
 //                            (N = 1, 2, 4, 10: IP cameras; 10 s: a "smart" GOP)
+//   h264-baseline-ippp-2s-lowrate  the 2 s one at an IP camera's bitrate: 2 Mbit/s at
+//                            640x480, scaled with the pixel count (6 Mbit/s at
+//                            1280x720), VBV-capped (noisier vectors than CRF 20)
 //   h264-main-bpyr-3ref      H.264 Main, 3 B frames, B-pyramid, 3 references, GOP 2 s
 //   h264-high-bpyr-3ref      the same with High profile (x264's defaults for B frames)
 //   hevc                     H.265 (libx265), x265's B frames and references, GOP 2 s
