@@ -19,7 +19,7 @@ HARNESSES=("${@:-${ALL[@]}}")
 
 if [ ! -f "$BUILD_DIR/build.ninja" ]; then
   CC=clang-14 CXX=clang++-14 cmake -S . -B "$BUILD_DIR" -G Ninja -DSLAPSE_FUZZ=ON \
-    -DSLAPSE_BUILD_TESTS=OFF ${CMAKE_CXX_COMPILER_LAUNCHER:+-DCMAKE_CXX_COMPILER_LAUNCHER=$CMAKE_CXX_COMPILER_LAUNCHER} \
+    -DSLAPSE_BUILD_TESTS=OFF -DSLAPSE_DEBUG_INFO=lines ${CMAKE_CXX_COMPILER_LAUNCHER:+-DCMAKE_CXX_COMPILER_LAUNCHER=$CMAKE_CXX_COMPILER_LAUNCHER} \
     > "$BUILD_DIR.configure.log" 2>&1 || { cat "$BUILD_DIR.configure.log"; exit 2; }
 fi
 cmake --build "$BUILD_DIR" -j"$(nproc)" --target slapse_fuzz || exit 2
