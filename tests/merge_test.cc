@@ -358,7 +358,7 @@ TEST(SegmentMergerTest, ChainsIpppVectorFieldsExactlyForAffineMotion) {
   }
 }
 
-TEST(SegmentMergerTest, ChainingOffKeepsOneFrameSegmentsAndIFramesBreakChains) {
+TEST(SegmentMergerTest, ChainingOffKeepsOneFrameSegmentsAndIFramesEndChainsContiguously) {
   MergeOptions off;
   off.chain_min_frames = 1;
   SegmentMerger merger(160, 128, kSigma, off);
@@ -383,13 +383,20 @@ TEST(SegmentMergerTest, ChainingOffKeepsOneFrameSegmentsAndIFramesBreakChains) {
     }
     if (auto p = chained.Push(f)) out.push_back(*p);
   }
-  // The pair 1 -> 2 into the I frame carries no vectors (PI without B frames)
-  // and ends the chain started at 0; then 2 -> 6 is chained.
+  // The pair into the I frame carries no vectors (PI without B frames) and
+  // ends the chain started at 0: it spans 0 -> 2, so that no frame falls
+  // between two pairs (a pair 1 -> 2 would leave the motion 0 -> 1 out of
+  // the trajectory while its time still passes); then 2 -> 6 is chained.
   ASSERT_GE(out.size(), 2u);
+  EXPECT_EQ(out[0].earlier_index, 0);
   EXPECT_EQ(out[0].later_index, 2);
+  EXPECT_EQ(out[0].earlier_timestamp_s, ZoomFrame(0, 10, 8, 0.99, {0, 0}).timestamp_s);
+  EXPECT_EQ(out[0].n_b, 1);
+  EXPECT_EQ(out[0].type, SegmentType::kII);  // from the I frame 0 to the I frame 2
   EXPECT_TRUE(out[0].correspondences.empty());
   EXPECT_EQ(out[1].earlier_index, 2);
   EXPECT_EQ(out[1].later_index, 6);
+  for (size_t k = 1; k < out.size(); ++k) EXPECT_EQ(out[k].earlier_index, out[k - 1].later_index);
 }
 
 // ExtendChain (a pair too short to initialise on): with chaining off, the next

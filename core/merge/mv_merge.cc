@@ -148,6 +148,26 @@ int SegmentMerger::CellOf(const Eigen::Vector2d& x_px) const {
   return row * mb_cols_ + col;
 }
 
+namespace {
+
+// A chain cut short by an anchor without vectors (an I frame): `pair`, the
+// vector-less pair into that anchor, is made to start at the chain's first
+// anchor, so consecutive pairs still share their anchors. Dropping the short
+// chain instead left the frames between the last emitted anchor and the
+// pair's earlier one out of every pair while their time passed (the filter
+// and the window refiner then disagreed on the step's span).
+void StartAtChain(const AnchorPair& chain, AnchorPair* pair) {
+  pair->earlier_index = chain.earlier_index;
+  pair->earlier_timestamp_s = chain.earlier_timestamp_s;
+  pair->n_b = static_cast<int>(pair->later_index - pair->earlier_index - 1);
+  const bool earlier_i = chain.type == SegmentType::kIP || chain.type == SegmentType::kII;
+  const bool later_i = pair->type == SegmentType::kPI || pair->type == SegmentType::kII;
+  pair->type = earlier_i ? (later_i ? SegmentType::kII : SegmentType::kIP)
+                         : (later_i ? SegmentType::kPI : SegmentType::kPP);
+}
+
+}  // namespace
+
 std::optional<AnchorPair> SegmentMerger::Push(const FrameRecord& frame) {
   if (frame.type == PictureType::kB) {
     // Keep only B frames that sit between the current anchor and a later one.
@@ -168,6 +188,11 @@ std::optional<AnchorPair> SegmentMerger::Push(const FrameRecord& frame) {
                         pair->later_index - pair->earlier_index < options_.chain_min_frames));
   if (chainable) {
     pair = Chain(std::move(*pair));
+  } else if (pair.has_value() && chain_.has_value() && !extend_next_ &&
+             pair->correspondences.empty() && chain_->later_index == pair->earlier_index) {
+    // (An extension's chain_ was emitted already: ExtendChain.)
+    StartAtChain(*chain_, &*pair);
+    chain_.reset();
   } else {
     chain_.reset();
   }

@@ -49,8 +49,9 @@ struct MergeOptions {
   // chains (0.77 % with 2, 1.53 % with 8 on seeds 1-4): the composition's
   // interpolation errors and fewer, longer steps cost more than the
   // single-frame parallax (docs/METHOD.md "Reference handling", docs/TRAJECTORY.md "Per codec").
-  // Since the window refiner and per-frame poses, chains are far worse still
-  // (2 frames: ATE median 3.3 %; docs/TRAJECTORY.md "Session 16"): keep 1.
+  // Re-measured with today's pipeline (docs/TRAJECTORY.md "Session 16",
+  // h264-ippp tuning drives): 2-frame chains ATE median / worst 0.55 / 1.56 %
+  // against 0.29 / 2.76 % unchained (3-frame: 0.73 / 1.83 %).
   int chain_min_frames = 1;
   // Direct vectors of a P frame whose reference is not certain
   // (FrameRecord::reference_certain false: several references allowed):
