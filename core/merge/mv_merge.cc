@@ -15,6 +15,15 @@ double BinomialPmf(int n, int k, double q) {
   return c * std::pow(q, k) * std::pow(1.0 - q, n - k);
 }
 
+// The one rule naming a segment by its anchors' picture types.
+SegmentType SegmentTypeOf(bool earlier_i, bool later_i) {
+  return later_i ? (earlier_i ? SegmentType::kII : SegmentType::kPI)
+                 : (earlier_i ? SegmentType::kIP : SegmentType::kPP);
+}
+
+bool EarlierIsI(SegmentType type) { return type == SegmentType::kIP || type == SegmentType::kII; }
+bool LaterIsI(SegmentType type) { return type == SegmentType::kPI || type == SegmentType::kII; }
+
 }  // namespace
 
 const char* SegmentTypeName(SegmentType type) {
@@ -160,10 +169,7 @@ void StartAtChain(const AnchorPair& chain, AnchorPair* pair) {
   pair->earlier_index = chain.earlier_index;
   pair->earlier_timestamp_s = chain.earlier_timestamp_s;
   pair->n_b = static_cast<int>(pair->later_index - pair->earlier_index - 1);
-  const bool earlier_i = chain.type == SegmentType::kIP || chain.type == SegmentType::kII;
-  const bool later_i = pair->type == SegmentType::kPI || pair->type == SegmentType::kII;
-  pair->type = earlier_i ? (later_i ? SegmentType::kII : SegmentType::kIP)
-                         : (later_i ? SegmentType::kPI : SegmentType::kPP);
+  pair->type = SegmentTypeOf(EarlierIsI(chain.type), LaterIsI(pair->type));
 }
 
 }  // namespace
@@ -249,7 +255,7 @@ std::optional<AnchorPair> SegmentMerger::Chain(AnchorPair step) {
     AnchorPair chained = step;
     chained.earlier_index = chain_->earlier_index;
     chained.earlier_timestamp_s = chain_->earlier_timestamp_s;
-    chained.type = chain_->type == SegmentType::kIP ? SegmentType::kIP : SegmentType::kPP;
+    chained.type = SegmentTypeOf(chain_->type == SegmentType::kIP, /*later_i=*/false);
     chained.n_b = static_cast<int>(chained.later_index - chained.earlier_index - 1);
     chained.correspondences.clear();
     std::vector<const Correspondence*> by_cell(static_cast<size_t>(mb_cols_) * mb_rows_, nullptr);
@@ -335,10 +341,7 @@ AnchorPair SegmentMerger::Build(const FrameRecord& later) const {
   pair.n_b = static_cast<int>(later.index - earlier_->index - 1);
   pair.mb_cols = mb_cols_;
   pair.mb_rows = mb_rows_;
-  const bool earlier_i = earlier_->type == PictureType::kI;
-  const bool later_i = later.type == PictureType::kI;
-  pair.type = later_i ? (earlier_i ? SegmentType::kII : SegmentType::kPI)
-                      : (earlier_i ? SegmentType::kIP : SegmentType::kPP);
+  pair.type = SegmentTypeOf(earlier_->type == PictureType::kI, later.type == PictureType::kI);
 
   std::vector<std::vector<MvCandidate>> cells(static_cast<size_t>(mb_cols_) * mb_rows_);
   // Direct: the later P frame's past vectors refer to the earlier anchor.
