@@ -59,9 +59,15 @@ class FrontEnd {
   void Reset();
 
   // `pair` (the last step's) had too short a baseline: the next one-frame P
-  // pair is composed onto it and emitted at once (SegmentMerger::ExtendChain;
-  // false: `pair` cannot be extended).
-  bool ExtendBaseline(const AnchorPair& pair) { return merger_.ExtendChain(pair); }
+  // pair is composed onto it and emitted at once (SegmentMerger::ExtendChain),
+  // and the plane extractor takes `pair` back (PlaneExtractor::Rewind), so
+  // the longer pair tracks the planes of the pair before `pair`. False:
+  // `pair` cannot be extended (nothing changed).
+  bool ExtendBaseline(const AnchorPair& pair) {
+    if (!merger_.ExtendChain(pair)) return false;
+    extractor_.Rewind();
+    return true;
+  }
 
   const Intrinsics& intrinsics() const { return intrinsics_; }
   // The extractor's learnt vertical (PlaneExtractor::vertical_down).

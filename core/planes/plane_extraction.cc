@@ -280,10 +280,23 @@ std::unique_ptr<PlaneFitter> MakeFitter(const PairMotion* motion) {
 PlaneExtractor::PlaneExtractor(PlaneExtractionOptions options) : options_(std::move(options)) {}
 
 void PlaneExtractor::Reset() {
+  before_.reset();
   tracks_.clear();
   has_previous_ = false;
   last_later_index_ = -1;
   last_discovery_s_ = -1.0;
+}
+
+bool PlaneExtractor::Rewind() {
+  if (!before_.has_value()) return false;
+  tracks_ = std::move(before_->tracks);
+  down_ = before_->down;
+  vertical_learnt_ = before_->vertical_learnt;
+  last_later_index_ = before_->last_later_index;
+  has_previous_ = before_->has_previous;
+  last_discovery_s_ = before_->last_discovery_s;
+  before_.reset();
+  return true;
 }
 
 bool PlaneExtractor::DiscoveryDue(const AnchorPair& pair,
@@ -480,6 +493,7 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
   if (!remaining.ok()) return remaining.status();
   const PairMotion* used_motion = options_.use_motion ? motion : nullptr;
   PairFit fit(pair, options_, used_motion, std::move(*remaining));
+  Memory before{{}, down_, vertical_learnt_, last_later_index_, has_previous_, last_discovery_s_};
 
   PlaneExtractionResult result;
   // The street-scene prior's vertical in this pair's later frame: the
@@ -505,7 +519,10 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
   std::sort(result.unassigned_indices.begin(), result.unassigned_indices.end());
 
   LearnVertical(result);
-  // 3. Remember the planes' MB cells in this pair's later anchor.
+  // 3. Remember the planes' MB cells in this pair's later anchor (and what
+  // was remembered before this pair, for Rewind).
+  before.tracks = std::move(tracks_);
+  before_ = std::move(before);
   tracks_.clear();
   for (const ExtractedPlane& plane : result.planes) {
     tracks_.push_back({plane.track_id,

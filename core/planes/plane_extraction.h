@@ -253,6 +253,14 @@ class PlaneExtractor {
   // Forgets the remembered planes (track ids keep increasing).
   void Reset();
 
+  // Takes the last Process call back: the planes, vertical and discovery
+  // time remembered before it are restored, so that a pair extended over a
+  // longer baseline (FrontEnd::ExtendBaseline: same earlier anchor, a later
+  // one further on) tracks from the anchor before it. Track ids the call
+  // gave stay used. False (nothing changed) when no call is left to take
+  // back: none since the last Reset or Rewind.
+  bool Rewind();
+
   // The street-scene prior's vertical (unit, pointing down) in the camera
   // frame of the last later anchor processed.
   const Eigen::Vector3d& vertical_down() const { return down_; }
@@ -281,7 +289,18 @@ class PlaneExtractor {
   bool IsRoad(const ExtractedPlane& plane) const;         // m_later set and non-zero
   bool OrientationOk(const ExtractedPlane& plane) const;  // the street-scene prior
 
+  // What Process remembers between pairs, before the last call (Rewind).
+  struct Memory {
+    std::vector<Track> tracks;
+    Eigen::Vector3d down;
+    bool vertical_learnt;
+    int64_t last_later_index;
+    bool has_previous;
+    double last_discovery_s;
+  };
+
   PlaneExtractionOptions options_;
+  std::optional<Memory> before_;
   std::vector<Track> tracks_;
   // The vertical (unit, pointing down) in the camera frame of the last later
   // anchor: the street-scene prior's reference.
