@@ -281,6 +281,36 @@ TEST(SegmentMergerTest, AssemblesIpPpAndPiSegments) {
   }
 }
 
+// ExtendChain refuses a pair whose segment had B frames (its next segment
+// would not compose onto it); a handed-back one-frame P pair followed by a
+// B-frame segment: the segment's pair starts at the handed-back pair's
+// earlier anchor, without vectors (they end at the anchor between).
+TEST(SegmentMergerTest, ExtendChainRefusesBFramePairsAndKeepsPairsContiguousAfterOne) {
+  SegmentMerger merger(64, 64, kSigma);
+  const double v = 0.5;
+  merger.Push(Frame(0, PictureType::kI, -1, -1, v));
+  for (int b = 1; b <= 3; ++b) merger.Push(Frame(b, PictureType::kB, 0, 4, v));
+  auto ip = merger.Push(Frame(4, PictureType::kP, 0, -1, v));
+  ASSERT_TRUE(ip);
+  EXPECT_FALSE(merger.ExtendChain(*ip));
+  auto pp = merger.Push(Frame(5, PictureType::kP, 4, -1, v));
+  ASSERT_TRUE(pp);
+  EXPECT_EQ(pp->earlier_index, 4);
+  EXPECT_TRUE(merger.ExtendChain(*pp));
+  for (int b = 6; b <= 8; ++b) merger.Push(Frame(b, PictureType::kB, 5, 9, v));
+  auto cut = merger.Push(Frame(9, PictureType::kP, 5, -1, v));
+  ASSERT_TRUE(cut);
+  EXPECT_EQ(cut->earlier_index, 4);
+  EXPECT_EQ(cut->later_index, 9);
+  EXPECT_EQ(cut->n_b, 4);
+  EXPECT_EQ(cut->type, SegmentType::kPP);
+  EXPECT_TRUE(cut->correspondences.empty());
+  auto next = merger.Push(Frame(10, PictureType::kP, 9, -1, v));
+  ASSERT_TRUE(next);
+  EXPECT_EQ(next->earlier_index, 9);
+  EXPECT_EQ(next->correspondences.size(), 16u);
+}
+
 TEST(SegmentMergerTest, IgnoresBFramesOfAnotherSegmentAndCorruptFrames) {
   SegmentMerger merger(64, 64, kSigma);
   merger.Push(Frame(0, PictureType::kI, -1, -1, 0.5));
@@ -402,7 +432,9 @@ TEST(SegmentMergerTest, ChainingOffKeepsOneFrameSegmentsAndIFramesEndChainsConti
 // ExtendChain (a pair too short to initialise on): with chaining off, the next
 // P frame is composed onto the given pair and emitted at once, as exactly as
 // a fixed chain; each further call extends it again; without a call the
-// merger is back to one pair per frame; an I frame ends the extension.
+// merger is back to one pair per frame; an I frame ends the extension, its
+// pair starting at the extended pair's first anchor (the extended pair was
+// handed back, so the anchor between has no pose yet).
 TEST(SegmentMergerTest, ExtendChainGrowsTheLastPairFrameByFrame) {
   const double s = 0.99;
   const Eigen::Vector2d b(0.7, -0.3), c(80, 60);
@@ -435,7 +467,11 @@ TEST(SegmentMergerTest, ExtendChainGrowsTheLastPairFrameByFrame) {
   i_frame.mvs.clear();
   pair = merger.Push(i_frame);
   ASSERT_TRUE(pair);
-  EXPECT_EQ(pair->earlier_index, 5);
+  EXPECT_EQ(pair->earlier_index, 4);
+  EXPECT_EQ(pair->later_index, 6);
+  EXPECT_EQ(pair->n_b, 1);
+  EXPECT_EQ(pair->type, SegmentType::kPI);
+  EXPECT_TRUE(pair->correspondences.empty());
   pair = merger.Push(ZoomFrame(7, 10, 8, s, b));
   ASSERT_TRUE(pair);
   EXPECT_EQ(pair->earlier_index, 6);

@@ -136,11 +136,12 @@ void SegmentMerger::Reset() {
   b_frames_.clear();
   chain_.reset();
   extend_next_ = false;
+  last_had_b_ = false;
 }
 
 bool SegmentMerger::ExtendChain(AnchorPair pair) {
   if (!earlier_.has_value() || pair.later_index != earlier_->index ||
-      pair.correspondences.empty()) {
+      pair.correspondences.empty() || last_had_b_) {
     return false;
   }
   chain_ = std::move(pair);
@@ -159,9 +160,10 @@ int SegmentMerger::CellOf(const Eigen::Vector2d& x_px) const {
 
 namespace {
 
-// A chain cut short by an anchor without vectors (an I frame): `pair`, the
-// vector-less pair into that anchor, is made to start at the chain's first
-// anchor, so consecutive pairs still share their anchors. Dropping the short
+// A chain cut short by a segment that cannot be composed onto it (an I
+// frame; B frames after a handed-back pair): `pair`, the pair into the
+// cut's anchor, is made to start at the chain's first anchor, so
+// consecutive pairs still share their anchors. Dropping the short
 // chain instead left the frames between the last emitted anchor and the
 // pair's earlier one out of every pair while their time passed (the filter
 // and the window refiner then disagreed on the step's span).
@@ -194,15 +196,20 @@ std::optional<AnchorPair> SegmentMerger::Push(const FrameRecord& frame) {
                         pair->later_index - pair->earlier_index < options_.chain_min_frames));
   if (chainable) {
     pair = Chain(std::move(*pair));
-  } else if (pair.has_value() && chain_.has_value() && !extend_next_ &&
-             pair->correspondences.empty() && chain_->later_index == pair->earlier_index) {
-    // (An extension's chain_ was emitted already: ExtendChain.)
+  } else if (pair.has_value() && chain_.has_value() && chain_->later_index == pair->earlier_index &&
+             (extend_next_ || pair->correspondences.empty())) {
+    // A chain cut short by an anchor without vectors (an I frame), or a
+    // handed-back pair (ExtendChain) by a segment that cannot be composed
+    // onto it: the pair starts at the chain's first anchor; its vectors,
+    // which end at the chain's last anchor, are dropped.
     StartAtChain(*chain_, &*pair);
+    pair->correspondences.clear();
     chain_.reset();
   } else {
     chain_.reset();
   }
   extend_next_ = false;
+  last_had_b_ = !b_frames_.empty();
   earlier_ = frame;
   earlier_->mvs.clear();
   earlier_->luma.clear();

@@ -118,14 +118,16 @@ class SegmentMerger {
   // from then on B frames are not merged: direct vectors only.
   std::optional<AnchorPair> Push(const FrameRecord& frame);
   void Reset();
-  // `pair`, the pair just emitted, becomes the open chain: if the next
-  // segment is a one-frame P segment, its vectors are composed onto `pair`
-  // and the longer pair is emitted at once, whatever chain_min_frames (a
-  // longer baseline for a pair whose one-frame parallax was too small to
-  // initialise on). Ignored unless `pair` ends at the current anchor and has
+  // `pair`, the pair just emitted, is handed back and becomes the open
+  // chain: if the next segment is a one-frame P segment, its vectors are
+  // composed onto `pair` and the longer pair is emitted at once, whatever
+  // chain_min_frames (a longer baseline for a pair whose one-frame parallax
+  // was too small). Ignored unless `pair` ends at the current anchor, has
   // correspondences (a pair into an I frame has none: nothing to compose
-  // onto); an unchainable next segment (B frames, an I frame) starts afresh.
-  // Returns whether `pair` was taken.
+  // onto) and its segment had no B frames. A next segment that cannot be
+  // composed onto it (B frames, an I frame) starts at `pair`'s earlier
+  // anchor without correspondences, so that consecutive pairs still share
+  // their anchors. Returns whether `pair` was taken.
   bool ExtendChain(AnchorPair pair);
 
   bool b_pyramid_seen() const { return b_pyramid_seen_; }
@@ -156,6 +158,7 @@ class SegmentMerger {
   // with one correspondence per macroblock cell of the last anchor (or none).
   std::optional<AnchorPair> chain_;
   bool extend_next_ = false;  // ExtendChain: emit the next composition at once
+  bool last_had_b_ = false;   // the last segment closed had B frames (ExtendChain refuses it)
   bool b_pyramid_seen_ = false;
 };
 
