@@ -1155,6 +1155,56 @@ TEST(PlaneExtractorTest, ConnectivitySplitsDisjointPatchesOfOneHomography) {
   EXPECT_EQ(result->planes[0].mb_indices.size(), big.size() + small.size());
 }
 
+// Rewind: a pair taken back (handed back for a longer baseline) leaves the
+// extractor as it was before that pair, so the longer pair from the same
+// earlier anchor tracks the planes of the pair before, under their ids. Only
+// the last call can be taken back, and nothing after a Reset.
+TEST(PlaneExtractorTest, RewindTakesTheLastPairBack) {
+  const std::vector<int> cells = Rect(22, 33, 18, 22);
+  auto make_pair = [&](int64_t earlier, int64_t later) {
+    AnchorPair pair = EmptyGridPair();
+    pair.earlier_index = earlier;
+    pair.later_index = later;
+    pair.earlier_timestamp_s = earlier / 30.0;
+    pair.later_timestamp_s = later / 30.0;
+    AddPatch(ExampleHomography(0.5), cells, &pair);
+    return pair;
+  };
+  auto planes_of = [](PlaneExtractor* extractor, const AnchorPair& pair) {
+    auto result = extractor->Process(pair, AllIndices(pair));
+    EXPECT_TRUE(result.ok()) << result.status().ToString();
+    return result.ok() ? *result : PlaneExtractionResult{};
+  };
+
+  PlaneExtractor extractor(PlaneExtractionOptions{});
+  EXPECT_FALSE(extractor.Rewind());  // nothing to take back yet
+  const PlaneExtractionResult first = planes_of(&extractor, make_pair(0, 1));
+  ASSERT_EQ(first.planes.size(), 1u);
+  const int id = first.planes[0].track_id;
+  const PlaneExtractionResult handed_back = planes_of(&extractor, make_pair(1, 2));
+  ASSERT_EQ(handed_back.planes.size(), 1u);
+  EXPECT_TRUE(handed_back.planes[0].tracked);
+  EXPECT_TRUE(extractor.Rewind());
+  EXPECT_FALSE(extractor.Rewind());  // the last call only
+  const PlaneExtractionResult longer = planes_of(&extractor, make_pair(1, 3));
+  ASSERT_EQ(longer.planes.size(), 1u);
+  EXPECT_TRUE(longer.planes[0].tracked);
+  EXPECT_EQ(longer.planes[0].track_id, id);
+  EXPECT_EQ(longer.num_tracks_lost, 0);
+
+  // Without it the longer pair does not continue the last one: nothing is
+  // tracked, the plane is found again under a new id.
+  PlaneExtractor plain(PlaneExtractionOptions{});
+  planes_of(&plain, make_pair(0, 1));
+  planes_of(&plain, make_pair(1, 2));
+  const PlaneExtractionResult again = planes_of(&plain, make_pair(1, 3));
+  ASSERT_EQ(again.planes.size(), 1u);
+  EXPECT_FALSE(again.planes[0].tracked);
+  EXPECT_EQ(again.num_tracks_lost, 1);
+  plain.Reset();
+  EXPECT_FALSE(plain.Rewind());
+}
+
 // min_discovery_interval_s: a pair that tracked a plane discovers at most
 // that often (stream time); one without a tracked plane always does.
 TEST(PlaneExtractorTest, DiscoveryRunsAtMostEveryIntervalWhileTracking) {
