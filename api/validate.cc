@@ -482,13 +482,15 @@ Status ValidatePipelineOptions(const v1::PipelineOptions& p) {
         "default), got " +
         std::to_string(p.refine_window_anchors()));
   }
-  if (p.has_init_max_baseline_s() &&
-      (!Finite(p.init_max_baseline_s()) || p.init_max_baseline_s() < 0 ||
-       p.init_max_baseline_s() > kMaxInitBaselineS)) {
-    return InvalidArgumentError("pipeline_options.init_max_baseline_s must be in [0, " +
-                                Num(kMaxInitBaselineS) + "] s (0 = off), got " +
-                                Num(p.init_max_baseline_s()));
-  }
+  auto extension = [](bool has, double v, const char* name) {
+    if (!has || (Finite(v) && v >= 0 && v <= kMaxBaselineExtensionS)) return Status::Ok();
+    return InvalidArgumentError(std::string("pipeline_options.") + name + " must be in [0, " +
+                                Num(kMaxBaselineExtensionS) + "] s (0 = off), got " + Num(v));
+  };
+  SLAPSE_RETURN_IF_ERROR(
+      extension(p.has_init_max_baseline_s(), p.init_max_baseline_s(), "init_max_baseline_s"));
+  SLAPSE_RETURN_IF_ERROR(
+      extension(p.has_track_max_baseline_s(), p.track_max_baseline_s(), "track_max_baseline_s"));
   auto positive = [](double v) { return Finite(v) && v > 0; };
   switch (p.scale_source()) {
     case v1::PipelineOptions::FIRST_STEP:

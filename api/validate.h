@@ -28,8 +28,9 @@ constexpr int kMaxReconnectIntervalMs = 3600000;
 constexpr size_t kMaxRtspUrlChars = 2048;
 // PipelineOptions.eps_h_px: the largest accepted, px.
 constexpr double kMaxEpsHPx = 100.0;
-// PipelineOptions.init_max_baseline_s: the longest accepted extension, s.
-constexpr double kMaxInitBaselineS = 5.0;
+// PipelineOptions.init_max_baseline_s and track_max_baseline_s: the longest
+// accepted extension, s.
+constexpr double kMaxBaselineExtensionS = 5.0;
 
 // The whole request: a source and its fields, the intrinsics and the
 // pipeline options.

@@ -125,7 +125,10 @@ bool SessionRunner::RunConnection(MvReader* reader, ConnectionEnd* end) {
     end->status = reader->Next(&frame);
     read_timer.Done();
     ReportStream(*reader, !end->status.ok());
-    if (!end->status.ok()) return true;
+    if (!end->status.ok()) {
+      FinishConnection();
+      return true;
+    }
     ++end->frames;
     ++frames_;
     // A connection's first frame: RUNNING (again, after a restart's CREATED;
@@ -252,6 +255,21 @@ bool SessionRunner::Feed(FrameRecord frame) {
   Publish(frame, done);
   KeepForOverlays(std::move(frame), done);
   return true;
+}
+
+// The connection ended: a pair the pipeline still held back for a longer
+// baseline is processed as it is, so its frames' poses are sent too
+// (Pipeline::Finish; a reconnection starts afresh anyway).
+void SessionRunner::FinishConnection() {
+  if (!pipeline_.has_value() || last_index_ < 0) return;
+  StageTimer pipeline_timer(Stage::kPipeline);
+  std::optional<PipelineStep> step = pipeline_->Finish();
+  pipeline_timer.Done();
+  if (!step.has_value()) return;
+  FrameRecord last;
+  last.index = last_index_;
+  last.timestamp_s = last_timestamp_s_;
+  Publish(last, &*step);
 }
 
 void SessionRunner::KeepForOverlays(FrameRecord frame, const PipelineStep* step) {

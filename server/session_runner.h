@@ -54,6 +54,8 @@ class SessionRunner {
   // Puts `frame` on the session's timeline, runs it through the pipeline and
   // publishes the result; false if the session ended.
   bool Feed(FrameRecord frame);
+  // At a connection's end: the pipeline's held-back pair, published (Pipeline::Finish).
+  void FinishConnection();
   void Publish(const FrameRecord& frame, const PipelineStep* step);
   // The dashboard's overlays (server/frame_overlays.h): an anchor frame and
   // the step's planes, kept only while someone asks for them.

@@ -37,6 +37,7 @@ void ExpectSameCarried(const PipelineOptions& a, const PipelineOptions& b) {
   EXPECT_EQ(a.window_refine, b.window_refine);
   EXPECT_EQ(a.motion_only_steps, b.motion_only_steps);
   EXPECT_EQ(a.init_max_baseline_s, b.init_max_baseline_s);
+  EXPECT_EQ(a.track_max_baseline_s, b.track_max_baseline_s);
   EXPECT_EQ(a.refine.window_anchors, b.refine.window_anchors);
 }
 
@@ -91,25 +92,41 @@ TEST(PipelineOptionsRoundTrip, WindowRefine) {
   EXPECT_TRUE(api::ValidatePipelineOptions(p).ok());
 }
 
-TEST(PipelineOptionsRoundTrip, InitMaxBaseline) {
-  v1::PipelineOptions p;
-  EXPECT_FALSE(p.has_init_max_baseline_s());
-  EXPECT_EQ(api::PipelineOptionsFromProto(p).init_max_baseline_s,
-            PipelineOptions{}.init_max_baseline_s);
-  PipelineOptions off;
-  off.init_max_baseline_s = 0.0;
-  ExpectRoundTrips(off);
-  EXPECT_TRUE(api::PipelineOptionsToProto(off).has_init_max_baseline_s());
-  for (double bad : {-0.1, 5.5, std::numeric_limits<double>::quiet_NaN()}) {
-    p.set_init_max_baseline_s(bad);
-    const Status s = api::ValidatePipelineOptions(p);
-    EXPECT_EQ(s.code(), StatusCode::kInvalidArgument) << bad;
-    EXPECT_NE(s.message().find("init_max_baseline_s"), std::string::npos) << s.message();
+// The two baseline extensions (while initialising, while tracking): unset
+// is the core default, 0 (off) survives the round trip, out of [0, 5] s is
+// refused naming the field.
+TEST(PipelineOptionsRoundTrip, BaselineExtensions) {
+  struct Field {
+    const char* name;
+    double PipelineOptions::*core;
+    bool (v1::PipelineOptions::*has)() const;
+    void (v1::PipelineOptions::*set)(double);
+  };
+  for (const Field& f : {Field{"init_max_baseline_s", &PipelineOptions::init_max_baseline_s,
+                               &v1::PipelineOptions::has_init_max_baseline_s,
+                               &v1::PipelineOptions::set_init_max_baseline_s},
+                         Field{"track_max_baseline_s", &PipelineOptions::track_max_baseline_s,
+                               &v1::PipelineOptions::has_track_max_baseline_s,
+                               &v1::PipelineOptions::set_track_max_baseline_s}}) {
+    SCOPED_TRACE(f.name);
+    v1::PipelineOptions p;
+    EXPECT_FALSE((p.*f.has)());
+    EXPECT_EQ(api::PipelineOptionsFromProto(p).*f.core, PipelineOptions{}.*f.core);
+    PipelineOptions off;
+    off.*f.core = 0.0;
+    ExpectRoundTrips(off);
+    EXPECT_TRUE((api::PipelineOptionsToProto(off).*f.has)());
+    for (double bad : {-0.1, 5.5, std::numeric_limits<double>::quiet_NaN()}) {
+      (p.*f.set)(bad);
+      const Status s = api::ValidatePipelineOptions(p);
+      EXPECT_EQ(s.code(), StatusCode::kInvalidArgument) << bad;
+      EXPECT_NE(s.message().find(f.name), std::string::npos) << s.message();
+    }
+    (p.*f.set)(0.0);
+    EXPECT_TRUE(api::ValidatePipelineOptions(p).ok());
+    (p.*f.set)(1.0);
+    EXPECT_TRUE(api::ValidatePipelineOptions(p).ok());
   }
-  p.set_init_max_baseline_s(0.0);
-  EXPECT_TRUE(api::ValidatePipelineOptions(p).ok());
-  p.set_init_max_baseline_s(1.0);
-  EXPECT_TRUE(api::ValidatePipelineOptions(p).ok());
 }
 
 TEST(PipelineOptionsRoundTrip, EpsHPx) {

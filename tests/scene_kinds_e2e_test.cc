@@ -157,5 +157,35 @@ TEST(SceneKindsEndToEndTest, SlowDriveAt60FpsInitialisesOnAnExtendedBaseline) {
       << "the extension is no longer what initialises this drive";
 }
 
+// The same car park, tracked for 3 s: a one-frame pair too short for its
+// parallax is extended by the next frame (PipelineOptions::
+// track_max_baseline_s) instead of coasting on the motion model. Every frame
+// keeps its pose (the extended pair's frames come with the longer pair);
+// fewer anchors coast, and the trajectory is no worse than coasting's.
+TEST(SceneKindsEndToEndTest, SlowDriveAt60FpsTracksOnExtendedBaselinesInsteadOfCoasting) {
+  auto slow = [](SimulateOptions* o) {
+    o->fps = 60.0;
+    o->duration_s = 3.0;
+    o->min_speed_mps = 3.0;
+    o->max_speed_mps = 4.0;
+  };
+  PipelineOptions coast;
+  coast.track_max_baseline_s = 0.0;
+  const DriveResult r = RunSmallDrive(SceneKind::kPlaza, 2, {}, "h264-ippp", slow);
+  const DriveResult without = RunSmallDrive(SceneKind::kPlaza, 2, coast, "h264-ippp", slow);
+  std::printf("extended %d pairs, coasting anchors %d (without: %d)\n", r.extended_pairs,
+              r.coasting_anchors, without.coasting_anchors);
+  ASSERT_TRUE(r.evaluated);
+  ASSERT_TRUE(without.evaluated);
+  // Most of the anchors coast without it; with it, most one-frame pairs are
+  // extended and few anchors coast.
+  EXPECT_GT(without.coasting_anchors, without.tracked_pairs / 2);
+  EXPECT_GT(r.extended_pairs, 10 + without.extended_pairs);
+  EXPECT_LT(r.coasting_anchors, without.coasting_anchors / 4);
+  EXPECT_EQ(r.posed_frames, r.frames);
+  EXPECT_EQ(without.posed_frames, without.frames);
+  EXPECT_LT(r.ate_m, 1.1 * without.ate_m + 0.01);
+}
+
 }  // namespace
 }  // namespace slapse

@@ -221,7 +221,13 @@ int RunRun(int argc, char** argv) {
                  "while waiting to initialise, extend a one-frame IPPP pair too short to decide "
                  "the motion by the next frames up to this span; 0 = off (docs/METHOD.md)")
       ->type_name("S")
-      ->check(CLI::Range(0.0, api::kMaxInitBaselineS))
+      ->check(CLI::Range(0.0, api::kMaxBaselineExtensionS))
+      ->capture_default_str();
+  app.add_option("--track-max-baseline-s", po.track_max_baseline_s,
+                 "while tracking, extend such a pair by the next frames up to this span instead "
+                 "of coasting on the motion model; 0 = off (docs/METHOD.md)")
+      ->type_name("S")
+      ->check(CLI::Range(0.0, api::kMaxBaselineExtensionS))
       ->capture_default_str();
   bool quiet = false;
   app.add_flag("--quiet", quiet, "no progress line");
@@ -271,9 +277,19 @@ int RunRun(int argc, char** argv) {
   Pipeline pipeline(*intrinsics, info.mv_sigma_px(), po);
   std::vector<PlaneEstimate> plane_estimates;
   const bool progress = !quiet && isatty(STDERR_FILENO);
-  int steps = 0, tracked = 0;
+  int steps = 0, tracked = 0, extended = 0;
   std::string last_note;   // why the last untracked step did not track
   std::string scale_note;  // the last step's, when it said something
+  auto count = [&](const PipelineStep& s) {
+    if (!s.note.empty()) last_note = s.note;
+    ++steps;
+    tracked += s.tracking;
+    extended += s.extended;
+    if (!s.scale_note.empty()) scale_note = s.scale_note;
+    if (steps_csv) WriteStepRow(steps_csv.get(), s, pipeline.trajectory());
+    AppendPlaneEstimates(s.later_index, s.planes, s.extracted, s.extracted_filter_ids,
+                         &plane_estimates);
+  };
   FrameRecord frame;
   Status end;
   while ((end = (*reader)->Next(&frame)).ok()) {
@@ -284,15 +300,13 @@ int RunRun(int argc, char** argv) {
                    static_cast<long long>(frame.index), frame.timestamp_s, steps, tracked,
                    pipeline.plane_map().size());
     }
-    if (!step->has_value()) continue;
-    const PipelineStep& s = **step;
-    if (!s.note.empty()) last_note = s.note;
-    ++steps;
-    tracked += s.tracking;
-    if (!s.scale_note.empty()) scale_note = s.scale_note;
-    if (steps_csv) WriteStepRow(steps_csv.get(), s, pipeline.trajectory());
-    AppendPlaneEstimates(s.later_index, s.planes, s.extracted, s.extracted_filter_ids,
-                         &plane_estimates);
+    if (step->has_value()) count(**step);
+  }
+  // A pair still handed back at the end (its frames' poses): processed as it is, counted once.
+  if (std::optional<PipelineStep> last = pipeline.Finish(); last.has_value()) {
+    --steps;
+    --extended;
+    count(*last);
   }
   if (progress) std::fprintf(stderr, "\n");
   const bool stream_ok = end.code() == StatusCode::kOutOfRange;
@@ -305,9 +319,11 @@ int RunRun(int argc, char** argv) {
   std::printf("input      %s (%s, %dx%d, %lld frames)\n", input.c_str(), codec.c_str(),
               info.width_px, info.height_px, static_cast<long long>((*reader)->stats().frames));
   PrintStreamReport(info, (*reader)->stats());
-  std::printf("tracked    %d of %d anchor pairs, %zu anchor poses, %zu planes in the map (%s)\n",
-              tracked, steps, pipeline.trajectory().size(), pipeline.plane_map().size(),
-              pipeline.metric() ? "metres" : "up to scale: first step = 1");
+  std::printf(
+      "tracked    %d of %d anchor pairs (%d extended), %zu anchor poses, %zu planes in "
+      "the map (%s)\n",
+      tracked, steps, extended, pipeline.trajectory().size(), pipeline.plane_map().size(),
+      pipeline.metric() ? "metres" : "up to scale: first step = 1");
   std::map<PoseKind, int> kinds;
   for (const FramePose& p : pipeline.poses()) ++kinds[p.quality.kind];
   std::printf(

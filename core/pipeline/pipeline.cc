@@ -48,6 +48,15 @@ bool BaselineTooShort(const PairMotionReport& motion) {
 
 }  // namespace
 
+bool Pipeline::ExtendWhileTracking(const FrontEndStep& front, double dt_s) {
+  if (finishing_ || !front.infinity.ok() || !BaselineTooShort(*front.infinity) ||
+      !(dt_s < options_.track_max_baseline_s) || !front_end_.ExtendBaseline(front.pair)) {
+    return false;
+  }
+  handed_back_ = front;
+  return true;
+}
+
 Pipeline::Pipeline(const Intrinsics& intrinsics, double sigma_px, PipelineOptions options)
     : intrinsics_(intrinsics),
       options_(options),
@@ -66,10 +75,23 @@ StatusOr<std::optional<PipelineStep>> Pipeline::Push(const FrameRecord& frame) {
   frame_poser_.Buffer(frame);
   std::optional<FrontEndStep> front = front_end_.Push(frame);
   if (!front.has_value()) return std::optional<PipelineStep>();
+  handed_back_.reset();  // extended by this pair, or given up
   return std::optional<PipelineStep>(Process(*front));
 }
 
+std::optional<PipelineStep> Pipeline::Finish() {
+  std::optional<PipelineStep> step;
+  if (handed_back_.has_value()) {
+    finishing_ = true;
+    step = Process(*handed_back_);
+    finishing_ = false;
+  }
+  Break();
+  return step;
+}
+
 void Pipeline::Break() {
+  handed_back_.reset();
   front_end_.Reset();
   frame_poser_.Reset();
   ResetFilter();
@@ -104,6 +126,14 @@ PipelineStep Pipeline::Process(const FrontEndStep& front) {
     Initialise(front, observations, dt_s, &step);
     extend_baseline = !step.tracking && front.infinity.ok() && BaselineTooShort(*front.infinity) &&
                       dt_s < options_.init_max_baseline_s && front_end_.ExtendBaseline(pair);
+  } else if (ExtendWhileTracking(front, dt_s)) {
+    // The filter stays at the earlier anchor; its planes are unchanged.
+    extend_baseline = true;
+    step.note =
+        "baseline too short: extended by the next frame, which this pair's frames are "
+        "posed with";
+    step.planes = ekf_.planes();
+    step.world_from_cam = world_from_cam_;
   } else {
     Advance(front, observations, dt_s, &step);
   }
@@ -149,6 +179,7 @@ PipelineStep Pipeline::Process(const FrontEndStep& front) {
     step.times.frame_poses_ms = MsSince(t1);
   } else if (extend_baseline) {
     // The frames after the earlier anchor are inside the extended pair.
+    step.extended = true;
     frame_poser_.Skip(pair.earlier_index);
   } else {
     frame_poser_.Skip(pair.later_index);

@@ -76,6 +76,12 @@ struct PipelineOptions : FrontEndOptions {
   // the parallax decides the motion. B-frame segments are never extended.
   // 0: off.
   double init_max_baseline_s = 0.5;
+  // The same while tracking (docs/METHOD.md "Adaptive baseline while
+  // tracking"; wire: PipelineOptions.track_max_baseline_s, flag
+  // --track-max-baseline-s): such a pair is handed back instead of coasting
+  // on the motion model; the filter waits for the longer pair, whose step
+  // covers both frames (the frame between is posed with it). 0: off.
+  double track_max_baseline_s = 0.5;
   // Motion-only steps (docs/METHOD.md "Motion-only steps"): a pair with
   // reliable motion but no plane observed still tracks. It initialises the
   // filter (no planes needed), and where no tracked plane is observed the
@@ -149,6 +155,11 @@ struct PipelineStep {
   std::string scale_note;
   StageTimes times;
   std::string note;  // why the step did not track, if it did not
+  // Too short a baseline: the pair was handed back to the front end and the
+  // next one-frame P pair extends it (init_max_baseline_s,
+  // track_max_baseline_s); tracking is false, and this pair's frames are
+  // posed with the next step.
+  bool extended = false;
   // The filter (re)started on this pair without a plane (motion_only_steps).
   bool motion_only_start = false;
   // No plane carried this step, the pair's own motion did (a MOTION_ONLY
@@ -177,6 +188,13 @@ class Pipeline {
   // pose, at the last step's speed as scale (as after a filter reset).
   // Later frames still need larger indices and timestamps.
   void Break();
+
+  // The stream ended (or broke off): a pair that was handed back for a
+  // longer baseline while tracking (track_max_baseline_s) and that no later
+  // frame extended is processed as it is, so that its frames get their
+  // poses; then as Break(). Returns that pair's step (nullopt: none was
+  // pending). Without it the last frames of such a stream stay unposed.
+  std::optional<PipelineStep> Finish();
 
   // Pose numbers: the n-th pose of the run (0-based, in display order) has
   // number n for good. Without ForgetFinal poses()[n] is pose n; after it
@@ -223,6 +241,11 @@ class Pipeline {
   // Starts the filter on the step's pair (waiting or failing sets step->note).
   void Initialise(const FrontEndStep& front, const std::vector<PlaneObservation>& observations,
                   double dt_s, PipelineStep* step);
+  // Whether the running filter skips this pair for a longer one
+  // (track_max_baseline_s); true: the front end extends it.
+  bool ExtendWhileTracking(const FrontEndStep& front, double dt_s);
+  std::optional<FrontEndStep> handed_back_;  // ExtendWhileTracking's pair, until the next one
+  bool finishing_ = false;                   // Finish: no more extensions
   // Predicts and updates the running filter (a numerical failure resets it).
   void Advance(const FrontEndStep& front, const std::vector<PlaneObservation>& observations,
                double dt_s, PipelineStep* step);

@@ -34,6 +34,8 @@ struct Run {
   bool metric = false;
   int pairs = 0, tracked = 0;
   int motion_only_anchors = 0;  // anchors posed without a plane (PoseKind::kMotionOnly)
+  int coasting_anchors = 0;     // anchors posed by the motion model (PoseKind::kCoasting)
+  int extended_pairs = 0;       // pairs handed back for a longer baseline (PipelineStep::extended)
   std::map<std::string, int> notes;
 };
 
@@ -41,20 +43,29 @@ StatusOr<Run> RunPipeline(const std::vector<FrameRecord>& frames, const Intrinsi
                           double sigma_px, const PipelineOptions& options) {
   Run run;
   Pipeline pipeline(intrinsics, sigma_px, options);
+  auto count = [&](const PipelineStep& s) {
+    ++run.pairs;
+    run.tracked += s.tracking;
+    run.extended_pairs += s.extended;
+    if (!s.tracking && !s.extended && !s.note.empty()) ++run.notes[s.note];
+    AppendPlaneEstimates(s.later_index, s.planes, s.extracted, s.extracted_filter_ids, &run.planes);
+  };
   for (const FrameRecord& f : frames) {
     auto step = pipeline.Push(f);
     if (!step.ok()) return step.status();
-    if (!step->has_value()) continue;
-    const PipelineStep& s = **step;
-    ++run.pairs;
-    run.tracked += s.tracking;
-    if (!s.tracking && !s.note.empty()) ++run.notes[s.note];
-    AppendPlaneEstimates(s.later_index, s.planes, s.extracted, s.extracted_filter_ids, &run.planes);
+    if (step->has_value()) count(**step);
+  }
+  // A pair still handed back at the end: processed as it is, counted once.
+  if (std::optional<PipelineStep> last = pipeline.Finish(); last.has_value()) {
+    --run.pairs;
+    --run.extended_pairs;
+    count(*last);
   }
   for (const auto& p : pipeline.trajectory()) run.poses.push_back(p);
   run.frame_poses = TimedPosesOf(pipeline.poses());
   for (const FramePose& p : pipeline.poses()) {
     run.motion_only_anchors += p.quality.kind == PoseKind::kMotionOnly;
+    run.coasting_anchors += p.quality.kind == PoseKind::kCoasting;
   }
   run.metric = pipeline.metric();
   return run;
@@ -134,6 +145,8 @@ StatusOr<DriveResult> EvaluateDrive(const DriveSpec& spec, const DriveEvalOption
   r.anchor_pairs = base->pairs;
   r.tracked_pairs = base->tracked;
   r.motion_only_anchors = base->motion_only_anchors;
+  r.coasting_anchors = base->coasting_anchors;
+  r.extended_pairs = base->extended_pairs;
   int most = 0;
   for (const auto& [note, n] : base->notes) {
     if (n > most) most = n, r.note = note;
@@ -303,7 +316,8 @@ std::string DriveResultsCsv(const std::vector<DriveResult>& results) {
          "ate_pct,anchor_ate_m,eps_D,rpe_m,rpe_deg,planes_evaluated,eps_d_m,eps_n_deg,metric_"
          "height,"
          "scale_err_height,metric_speed,scale_err_speed,metric_first_step,scale_err_first_step,"
-         "camera_height_m,pitch_down_deg,simulate_s,evaluate_s,note,motion_only_anchors\n";
+         "camera_height_m,pitch_down_deg,simulate_s,evaluate_s,note,motion_only_anchors,coasting_"
+         "anchors,extended_pairs\n";
   for (const DriveResult& r : results) {
     const SimulateOptions& o = r.spec.sim;
     std::string note = r.note;
@@ -320,7 +334,8 @@ std::string DriveResultsCsv(const std::vector<DriveResult>& results) {
       csv << "," << (r.metric[k] ? 1 : 0) << "," << r.scale_error[k];
     }
     csv << "," << o.camera_height_min_m << "," << o.pitch_down_min_deg << "," << r.simulate_s << ","
-        << r.evaluate_s << ",\"" << note << "\"," << r.motion_only_anchors << "\n";
+        << r.evaluate_s << ",\"" << note << "\"," << r.motion_only_anchors << ","
+        << r.coasting_anchors << "," << r.extended_pairs << "\n";
   }
   return csv.str();
 }

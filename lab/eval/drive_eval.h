@@ -38,7 +38,9 @@ struct DriveResult {
   int64_t first_pose_frame = -1;  // -1: never
   double first_pose_s = -1.0;
   int anchor_pairs = 0, tracked_pairs = 0;
-  int motion_only_anchors = 0;    // tracked anchors without a plane (PoseKind::kMotionOnly)
+  int motion_only_anchors = 0;  // tracked anchors without a plane (PoseKind::kMotionOnly)
+  int coasting_anchors = 0;     // tracked anchors the motion model posed (PoseKind::kCoasting)
+  int extended_pairs = 0;       // pairs handed back for a longer baseline (PipelineStep::extended)
   double drive_distance_m = 0.0;  // the true path, whole drive
   bool evaluated = false;         // >= 3 poses: the errors below are valid
   double distance_m = 0.0;        // the true path over the posed frames
@@ -49,7 +51,7 @@ struct DriveResult {
   double eps_d_m = -1.0, eps_n_deg = -1.0;  // -1: no plane evaluated
   bool metric[kNumScaleSources] = {false, false, false};
   double scale_error[kNumScaleSources] = {0, 0, 0};  // valid where metric[] and evaluated
-  std::string note;                           // the most frequent reason a pair did not track
+  std::string note;  // the most frequent reason a pair did not track (extended pairs aside)
   double simulate_s = 0.0, evaluate_s = 0.0;  // wall time
 };
 
