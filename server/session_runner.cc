@@ -382,11 +382,15 @@ void SessionRunner::ApplyUpdatesLocked(const StepUpdates& u, std::vector<v1::Ses
   pu->set_tracking(u.pose.tracking);
   pu->set_metric(u.pose.metric);
   pu->set_note(u.pose.note);
+  pu->set_extended(u.pose.extended);
   if (u.pose.tracking) *pu->mutable_quality() = api::PoseQualityToProto(u.pose.quality);
   for (const FramePose& p : u.frame_poses) *pu->add_frame_poses() = api::FramePoseToProto(p);
   auto r = received_.find(u.pose.anchor_index);
   if (r != received_.end()) *pu->mutable_frame_received_time() = r->second;
-  received_.erase(received_.begin(), received_.upper_bound(u.pose.anchor_index));
+  // An extended pair's anchor is posed by a later step (Pipeline::Finish
+  // may bring that same anchor again): its time is kept.
+  received_.erase(received_.begin(), u.pose.extended ? received_.lower_bound(u.pose.anchor_index)
+                                                     : received_.upper_bound(u.pose.anchor_index));
   events->push_back(std::move(pose));
 
   for (const PlaneChange& c : u.planes) {

@@ -133,18 +133,23 @@ TEST(SceneKindsEndToEndTest, WindowRefinerHoldsOnOneFramePairs) {
   }
 }
 
+// The car park of the two tests below: 3-4 m/s at 60 fps, `duration_s` long.
+std::function<void(SimulateOptions*)> SlowCarPark(double duration_s) {
+  return [duration_s](SimulateOptions* o) {
+    o->fps = 60.0;
+    o->duration_s = duration_s;
+    o->min_speed_mps = 3.0;
+    o->max_speed_mps = 4.0;
+  };
+}
+
 // A car park at 11-14 km/h, 60 fps, H.264 IPPP: one frame moves the camera 5-7 cm,
 // too little parallax to decide the pair's motion. While waiting to
 // initialise, the pair is extended frame by frame
 // (PipelineOptions::init_max_baseline_s) until the parallax decides it: posed
 // from the first frame on. Without the extension the drive waits.
 TEST(SceneKindsEndToEndTest, SlowDriveAt60FpsInitialisesOnAnExtendedBaseline) {
-  auto slow = [](SimulateOptions* o) {
-    o->fps = 60.0;
-    o->duration_s = 2.0;
-    o->min_speed_mps = 3.0;
-    o->max_speed_mps = 4.0;
-  };
+  const auto slow = SlowCarPark(2.0);
   PipelineOptions no_extension;
   no_extension.init_max_baseline_s = 0.0;
   const DriveResult r = RunSmallDrive(SceneKind::kPlaza, 2, {}, "h264-ippp", slow);
@@ -163,12 +168,7 @@ TEST(SceneKindsEndToEndTest, SlowDriveAt60FpsInitialisesOnAnExtendedBaseline) {
 // keeps its pose (the extended pair's frames come with the longer pair);
 // fewer anchors coast, and the trajectory is no worse than coasting's.
 TEST(SceneKindsEndToEndTest, SlowDriveAt60FpsTracksOnExtendedBaselinesInsteadOfCoasting) {
-  auto slow = [](SimulateOptions* o) {
-    o->fps = 60.0;
-    o->duration_s = 3.0;
-    o->min_speed_mps = 3.0;
-    o->max_speed_mps = 4.0;
-  };
+  const auto slow = SlowCarPark(3.0);
   PipelineOptions coast;
   coast.track_max_baseline_s = 0.0;
   const DriveResult r = RunSmallDrive(SceneKind::kPlaza, 2, {}, "h264-ippp", slow);

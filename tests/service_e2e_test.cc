@@ -6,6 +6,7 @@
 #include <google/protobuf/util/time_util.h>
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <map>
 #include <memory>
 #include <sstream>
@@ -18,6 +19,7 @@
 #include "core/mv/mv_reader.h"
 #include "core/pipeline/pipeline.h"
 #include "core/pipeline/result_io.h"
+#include "lab/codec/video_encoder.h"
 #include "server/server.h"
 #include "tests/test_streams.h"
 
@@ -53,6 +55,7 @@ StatusOr<OfflineResult> RunOffline(const testing::TestDrive& drive) {
     ++out.frames;
   }
   if (end.code() != StatusCode::kOutOfRange) return end;
+  pipeline.Finish();  // as `slapse run` does: a pair still handed back is posed
   out.poses = pipeline.poses();
   out.trajectory = TimedPosesOf(out.poses);
   out.planes = pipeline.plane_map();
@@ -65,6 +68,7 @@ struct ServedResult {
   v1::Session session;
   v1::Trajectory trajectory;
   v1::PlaneMap plane_map;
+  int extended_updates = 0;  // PoseUpdate.extended: a pair waiting for the next frame
 };
 
 // Creates an upload session, uploads the drive, watches it to its final
@@ -85,6 +89,7 @@ void Serve(SlapseClient& client, const testing::TestDrive& drive, ServedResult* 
     if (e.has_pose()) {
       // The latency stamps: the anchor frame was read before its step's event.
       ++poses;
+      out->extended_updates += e.pose().extended();
       EXPECT_TRUE(e.pose().has_frame_received_time());
       EXPECT_TRUE(e.pose().has_emit_time());
       EXPECT_LE(e.pose().frame_received_time(), e.pose().emit_time());
@@ -186,6 +191,10 @@ class ServiceE2eTest : public ::testing::Test {
     }
   }
 
+  static void TearDownTestSuite() {
+    for (const testing::TestDrive& d : drives_) std::filesystem::remove_all(d.dir);
+  }
+
   void SetUp() override {
     ASSERT_EQ(drives_.size(), 2u);
     // Not vacuous: each drive tracks and maps, and the two results differ.
@@ -248,6 +257,33 @@ TEST_F(ServiceE2eTest, ConcurrentSessionsStayIsolated) {
     SCOPED_TRACE("session of drive 1");
     ExpectSameResults(offline_[1], served[1]);
   }
+}
+
+// A car park at 3-4 m/s, 60 fps, H.264 IPPP: one-frame pairs too short for
+// their parallax wait for the next frame (PipelineOptions::
+// track_max_baseline_s). The session's result equals the offline run to the
+// last frame: a pair still held back when the upload ends is processed at
+// the connection's end (Pipeline::Finish) and its frames' poses are sent.
+TEST_F(ServiceE2eTest, SlowIpppDriveIsPosedToItsLastFrameAsOffline) {
+  SimulateOptions o = testing::SmallMpeg2DriveOptions(2, 2.0);
+  o.scene_kind = SceneKind::kPlaza;
+  o.fps = 60.0;
+  o.min_speed_mps = 3.0;
+  o.max_speed_mps = 4.0;
+  auto encoder = EncoderPreset("h264-ippp", o.fps);
+  ASSERT_TRUE(encoder.ok()) << encoder.status().ToString();
+  o.encoder = *encoder;
+  auto drive = testing::SimulateTestDrive("service_e2e_slow", o);
+  ASSERT_TRUE(drive.ok()) << drive.status().ToString();
+  auto offline = RunOffline(*drive);
+  ASSERT_TRUE(offline.ok()) << offline.status().ToString();
+  // Not vacuous: every frame is posed (so the last pair's frames are too).
+  EXPECT_EQ(static_cast<int64_t>(offline->trajectory.size()), offline->frames);
+  ServedResult served;
+  ASSERT_NO_FATAL_FAILURE(Serve(*client_, *drive, &served));
+  ExpectSameResults(*offline, served);
+  EXPECT_GT(served.extended_updates, 0);
+  std::filesystem::remove_all(drive->dir);
 }
 
 }  // namespace

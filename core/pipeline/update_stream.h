@@ -41,6 +41,7 @@ struct PoseChange {
   bool tracking = false;  // the filter is running (pose and planes valid)
   bool metric = false;    // lengths are metres
   std::string note;       // why the step did not track, if it did not
+  bool extended = false;  // PipelineStep::extended: its poses come with a later step
   PoseQuality quality;    // the anchor's, when tracking
 };
 
