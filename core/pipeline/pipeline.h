@@ -244,8 +244,6 @@ class Pipeline {
   // Whether the running filter skips this pair for a longer one
   // (track_max_baseline_s); true: the front end extends it.
   bool ExtendWhileTracking(const FrontEndStep& front, double dt_s);
-  std::optional<FrontEndStep> handed_back_;  // ExtendWhileTracking's pair, until the next one
-  bool finishing_ = false;                   // Finish: no more extensions
   // Predicts and updates the running filter (a numerical failure resets it).
   void Advance(const FrontEndStep& front, const std::vector<PlaneObservation>& observations,
                double dt_s, PipelineStep* step);
@@ -280,6 +278,8 @@ class Pipeline {
   PlaneEkf ekf_;
   WindowRefiner refiner_;
   int64_t last_index_ = -1;
+  std::optional<FrontEndStep> handed_back_;  // ExtendWhileTracking's pair, until the next one
+  bool finishing_ = false;                   // in Finish: no more extensions
   Rigid3d world_from_cam_;
   bool metric_ = false;
   std::vector<TimedPose> trajectory_;
