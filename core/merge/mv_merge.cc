@@ -262,7 +262,7 @@ std::optional<AnchorPair> SegmentMerger::Chain(AnchorPair step) {
     AnchorPair chained = step;
     chained.earlier_index = chain_->earlier_index;
     chained.earlier_timestamp_s = chain_->earlier_timestamp_s;
-    chained.type = SegmentTypeOf(chain_->type == SegmentType::kIP, /*later_i=*/false);
+    chained.type = SegmentTypeOf(EarlierIsI(chain_->type), /*later_i=*/false);
     chained.n_b = static_cast<int>(chained.later_index - chained.earlier_index - 1);
     chained.correspondences.clear();
     std::vector<const Correspondence*> by_cell(static_cast<size_t>(mb_cols_) * mb_rows_, nullptr);

@@ -46,11 +46,18 @@ bool BaselineTooShort(const PairMotionReport& motion) {
   return motion.num_parallax_inliers * 2 >= motion.num_rotation_outliers;
 }
 
+// The one test of both baseline extensions (init_max_baseline_s,
+// track_max_baseline_s): `front`'s pair, dt_s long, is too short for its
+// parallax and shorter than max_s, and the front end took it back to extend it.
+bool HandBack(FrontEnd* front_end, const FrontEndStep& front, double dt_s, double max_s) {
+  return front.infinity.ok() && BaselineTooShort(*front.infinity) && dt_s < max_s &&
+         front_end->ExtendBaseline(front.pair);
+}
+
 }  // namespace
 
 bool Pipeline::ExtendWhileTracking(const FrontEndStep& front, double dt_s) {
-  if (finishing_ || !front.infinity.ok() || !BaselineTooShort(*front.infinity) ||
-      !(dt_s < options_.track_max_baseline_s) || !front_end_.ExtendBaseline(front.pair)) {
+  if (finishing_ || !HandBack(&front_end_, front, dt_s, options_.track_max_baseline_s)) {
     return false;
   }
   handed_back_ = front;
@@ -124,8 +131,8 @@ PipelineStep Pipeline::Process(const FrontEndStep& front) {
     step.note = "anchor timestamps do not increase";
   } else if (!ekf_.initialized()) {
     Initialise(front, observations, dt_s, &step);
-    extend_baseline = !step.tracking && front.infinity.ok() && BaselineTooShort(*front.infinity) &&
-                      dt_s < options_.init_max_baseline_s && front_end_.ExtendBaseline(pair);
+    extend_baseline =
+        !step.tracking && HandBack(&front_end_, front, dt_s, options_.init_max_baseline_s);
   } else if (ExtendWhileTracking(front, dt_s)) {
     // The filter stays at the earlier anchor; its planes are unchanged.
     extend_baseline = true;
