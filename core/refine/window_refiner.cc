@@ -11,6 +11,7 @@
 #include <ceres/rotation.h>
 
 #include "core/common/angles.h"
+#include "core/common/so3.h"
 #include "core/refine/plane_transfer_cost.h"
 
 namespace slapse {
@@ -94,6 +95,31 @@ struct RoadHeightResidual {
   double height, inv_sigma;
 };
 
+// Gauge (e): the road's attitude in camera i. With R_i the rotation of
+// world_from_cam_i, R_wr that of the oldest camera (constant) and pi_r the
+// road in the oldest camera, the road's unit normal in camera i is
+//   n_i = R_i^T R_wr pi_r / |pi_r|,
+// and r = B^T (n_i - n_ref) / sigma, B = TangentBasis(n_ref) (two angles, rad,
+// for small deviations).
+struct RoadAttitudeResidual {
+  RoadAttitudeResidual(const Eigen::Matrix3d& R_wr, const Eigen::Vector3d& n_ref, double sigma_rad)
+      : R_wr(R_wr), n_ref(n_ref), B(TangentBasis(n_ref)), inv_sigma(1.0 / sigma_rad) {}
+  template <typename T>
+  bool operator()(const T* q_i, const T* pi_r, T* residual) const {
+    const Eigen::Map<const Eigen::Quaternion<T>> q(q_i);
+    const Eigen::Map<const Vec3<T>> pi(pi_r);
+    const Vec3<T> n_i = q.conjugate() * (R_wr.cast<T>() * (pi / pi.norm()));
+    const Eigen::Matrix<T, 2, 1> e = B.transpose().cast<T>() * (n_i - n_ref.cast<T>());
+    residual[0] = e(0) * T(inv_sigma);
+    residual[1] = e(1) * T(inv_sigma);
+    return true;
+  }
+  Eigen::Matrix3d R_wr;
+  Eigen::Vector3d n_ref;
+  Eigen::Matrix<double, 3, 2> B;
+  double inv_sigma;
+};
+
 // Poses as Ceres parameter blocks: Eigen quaternion (x, y, z, w) and centre.
 struct PoseBlock {
   Eigen::Quaterniond q;
@@ -105,10 +131,12 @@ struct PoseBlock {
 Status WindowRefinerOptions::Check(const std::string& who) const {
   if (window_anchors < 3 || max_iterations < 1 || max_mbs_per_plane < 4 || !(extra_sigma_px > 0) ||
       !(huber_k > 0) || !(gauge_step_rel_sigma > 0) || !(road_height_rel_sigma > 0) ||
-      !(speed_change_rel_per_sqrt_s > 0) || !(angular_rate_change_rad_s_per_sqrt_s > 0)) {
+      !(speed_change_rel_per_sqrt_s > 0) || !(angular_rate_change_rad_s_per_sqrt_s > 0) ||
+      !(road_attitude_sigma_deg >= 0)) {
     return InvalidArgumentError(who +
                                 ": window_anchors must be >= 3, max_iterations >= 1, "
-                                "max_mbs_per_plane >= 4 and every sigma > 0");
+                                "max_mbs_per_plane >= 4, every sigma > 0 (road_attitude_sigma_deg "
+                                ">= 0)");
   }
   return Status::Ok();
 }
@@ -122,7 +150,6 @@ void WindowRefiner::Reset() {
   plane_solves_.clear();
   road_id_ = -1;
   next_internal_id_ = -2;
-  fixed_road_height_.reset();
   before_.reset();
 }
 
@@ -288,6 +315,11 @@ Status WindowRefiner::Refine(WindowRefineReport* report) {
   if (const auto road = RoadInNewest(); road.has_value()) {
     rep.road_in_window = true;
     rep.road_distance = 1.0 / road->norm();
+    if (road_normal_cam_ && rep.road_pairs > 0) {  // (e)'s reference: the mean over solves
+      ++road_normal_solves_;
+      const double w = 1.0 / static_cast<double>(road_normal_solves_);
+      road_normal_cam_ = ((1.0 - w) * *road_normal_cam_ + w * road->normalized()).normalized();
+    }
   }
   return Status::Ok();
 }
@@ -351,14 +383,32 @@ void WindowRefiner::AddGaugeAndPriors(Problem* problem, size_t first, WindowRefi
             new StepLengthResidual(c0, length, options_.gauge_step_rel_sigma)),
         nullptr, wp.poses[first + 1].c.data());
   }
-  // (c) the road's height, once it took part in a solve (or is metric).
+  // (c) the road's height and (e) its attitude, once it took part in a solve
+  // (or is metric): the references are taken then and held.
   const auto road = wp.pis.find(road_id_);
   if (road != wp.pis.end() && rep->road_pairs > 0 &&
-      (fixed_road_height_.has_value() || plane_solves_.count(road_id_))) {
-    const double h = fixed_road_height_.value_or(1.0 / road->second.norm());
-    wp.problem.AddResidualBlock(new ceres::AutoDiffCostFunction<RoadHeightResidual, 1, 3>(
-                                    new RoadHeightResidual(h, options_.road_height_rel_sigma)),
-                                nullptr, road->second.data());
+      (road_height_.has_value() || plane_solves_.count(road_id_))) {
+    // Held only with the attitude prior: held alone, it made the MPEG-2
+    // tuning drives worse (docs/METHOD.md "The road's attitude").
+    const bool hold = options_.road_attitude_sigma_deg > 0;
+    if (!road_height_ && hold) road_height_ = 1.0 / road->second.norm();
+    if (!road_normal_cam_ && hold && rep->road_pairs + 1 >= options_.window_anchors) {
+      road_normal_cam_ = road->second.normalized();
+    }
+    wp.problem.AddResidualBlock(
+        new ceres::AutoDiffCostFunction<RoadHeightResidual, 1, 3>(new RoadHeightResidual(
+            road_height_.value_or(1.0 / road->second.norm()), options_.road_height_rel_sigma)),
+        nullptr, road->second.data());
+    if (options_.road_attitude_sigma_deg > 0 && road_normal_cam_) {
+      const Eigen::Matrix3d R_wr = anchors_[0].world_from_cam.R();
+      const double sigma_rad = DegToRad(options_.road_attitude_sigma_deg);
+      for (size_t k = first; k < wp.poses.size(); ++k) {
+        wp.problem.AddResidualBlock(
+            new ceres::AutoDiffCostFunction<RoadAttitudeResidual, 2, 4, 3>(
+                new RoadAttitudeResidual(R_wr, *road_normal_cam_, sigma_rad)),
+            nullptr, wp.poses[k].q.coeffs().data(), road->second.data());
+      }
+    }
   }
   // (d) the motion prior over each three consecutive poses.
   double max_speed = 0;
@@ -400,7 +450,7 @@ void WindowRefiner::Rescale(double s) {
   for (Anchor& a : anchors_) a.world_from_cam.translation *= s;
   if (before_) before_->world_from_cam.translation *= s;
   for (auto& [id, plane] : planes_world_) plane.distance *= s;
-  if (fixed_road_height_) *fixed_road_height_ *= s;
+  if (road_height_) *road_height_ *= s;
 }
 
 }  // namespace slapse

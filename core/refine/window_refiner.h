@@ -29,12 +29,27 @@
 //      that see it, so a new plane's scale is tied to the steps that saw the
 //      old ones;
 //  (c) the road: its distance from the oldest camera (the camera height) has
-//      a prior at its previous estimate (or the metric camera height) with
-//      road_height_rel_sigma;
+//      a prior with road_height_rel_sigma at the metric camera height, or
+//      with (e) on at the height the road had when it first took part in a
+//      solve, held from then on (a car's camera stays at one height above
+//      the road; a prior at each solve's previous estimate, the default,
+//      lets the height and with it the scale random-walk);
 //  (d) the motion prior: consecutive steps' velocities (t / dt, in the body
 //      frame) and angular velocities differ by a random walk (sigma ~
 //      sqrt(dt)), so a step that sees only new planes cannot take a new
-//      scale in one step.
+//      scale in one step;
+//  (e) the road's attitude: a car-mounted camera sees the road under one
+//      attitude (its mount's pitch and roll; the car pitches and rolls on its
+//      suspension by about a degree), so each pose's road normal has a prior
+//      at a reference normal, with road_attitude_sigma_deg per axis (0, the
+//      default: off). The reference is taken from the first window whose
+//      every pair saw the road, then averaged over the solves that see it.
+//      Without it, short baselines (one-frame H.264 IPPP pairs) let the
+//      cameras' pitch relative to the road drift by degrees over seconds, and
+//      a tilted road changes every road block's depth, hence the step lengths
+//      (docs/METHOD.md "The road's attitude").
+// The references of (c) and (e) belong to the trajectory, not the window:
+// Reset keeps them, Rescale scales the height.
 // Cost: Levenberg-Marquardt (Ceres, dense Schur on the few poses), at most
 // max_iterations; macroblocks per (pair, plane) are subsampled to
 // max_mbs_per_plane, so a solve's cost is bounded by the window size.
@@ -64,6 +79,10 @@ struct WindowRefinerOptions {
   double huber_k = 2.0;                 // Huber threshold, normalised residual units
   double gauge_step_rel_sigma = 0.002;  // (a): oldest step's length, relative
   double road_height_rel_sigma = 0.01;  // (c): road distance, relative
+  // (e): road normal per camera, deg per axis; 0 = off (then (c) is at each
+  // solve's previous estimate). Off by default: on, it made one small H.264
+  // IPPP intersection drive 2.5x worse (docs/METHOD.md "The road's attitude").
+  double road_attitude_sigma_deg = 0.0;
   // (d): the velocities' random walk, as in the EKF's process model: over
   // dt seconds the body-frame velocity changes by speed_change_rel_per_sqrt_s
   // * sqrt(dt) relative to the speed (0.15: 5.5 % over one 30 fps IBBBP
@@ -80,8 +99,9 @@ struct WindowRefinerOptions {
   double reassociate_max_distance_ratio = 1.3;
 
   // InvalidArgument (prefixed with `who`) unless window_anchors >= 3,
-  // max_iterations >= 1, max_mbs_per_plane >= 4, every sigma and the angle
-  // are > 0 and the distance ratio > 1.
+  // max_iterations >= 1, max_mbs_per_plane >= 4, every sigma (but
+  // road_attitude_sigma_deg, >= 0) and the angle are > 0 and the distance
+  // ratio > 1.
   Status Check(const std::string& who = "WindowRefinerOptions") const;
 };
 
@@ -126,12 +146,18 @@ class WindowRefiner {
   Status Refine(WindowRefineReport* report);
 
   // Metric road height: from now on the road prior (c) uses this distance
-  // (trajectory units) instead of its running estimate.
-  void SetRoadHeight(double height) { fixed_road_height_ = height; }
+  // (trajectory units) instead of the held estimate.
+  void SetRoadHeight(double height) { road_height_ = height; }
 
   // Multiplies every length by s (poses, planes, priors).
   void Rescale(double s);
+  // Empties the window (the filter restarted, or a step without planes); the
+  // road references of (c) and (e) stay: they belong to the trajectory, which
+  // continues.
   void Reset();
+  // The held references (nullopt until the road first took part in a solve).
+  std::optional<double> road_height() const { return road_height_; }
+  std::optional<Eigen::Vector3d> road_normal_cam() const { return road_normal_cam_; }
 
   size_t size() const { return anchors_.size(); }
   int64_t index(size_t k) const { return anchors_[k].index; }
@@ -161,7 +187,11 @@ class WindowRefiner {
   std::map<int, int> plane_solves_;      // plane id -> solves it took part in
   int road_id_ = -1;
   int next_internal_id_ = -2;  // ids for planes moved aside by Reassociate (-1: none)
-  std::optional<double> fixed_road_height_;
+  // The trajectory's road references (kept by Reset): (c) the camera height
+  // (trajectory units) and (e) the road's unit normal in the camera.
+  std::optional<double> road_height_;
+  std::optional<Eigen::Vector3d> road_normal_cam_;
+  int64_t road_normal_solves_ = 0;  // solves averaged into road_normal_cam_
   // The anchor before the window (constant): the oldest step's velocity prior.
   std::optional<Anchor> before_;
 };
