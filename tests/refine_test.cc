@@ -13,6 +13,7 @@
 #include <random>
 #include <vector>
 
+#include "core/common/angles.h"
 #include "core/common/plane.h"
 #include "core/refine/plane_transfer_cost.h"
 
@@ -247,7 +248,7 @@ RoadAfterRestarts StreamRoadWithRestarts(int anchors, const WindowRefinerOptions
       refiner.Reset();
       refiner.Push(k - 1, (k - 1) * kDt, newest, {}, {}, -1);
       const Eigen::Vector3d tilted =
-          Eigen::AngleAxisd(3.0 * M_PI / 180.0, Eigen::Vector3d::UnitX()) * pb.normal;
+          Eigen::AngleAxisd(DegToRad(3.0), Eigen::Vector3d::UnitX()) * pb.normal;
       guess[0] = tilted / (0.9 * pb.distance);
     }
     const Rigid3d step_guess = refiner.world_from_cam(refiner.size() - 1) * a_from_b;
@@ -261,8 +262,7 @@ RoadAfterRestarts StreamRoadWithRestarts(int anchors, const WindowRefinerOptions
   const std::optional<Eigen::Vector3d> road = refiner.RoadInNewest();
   EXPECT_TRUE(road.has_value());
   if (!road) return r;
-  r.attitude_error_deg =
-      std::acos(std::min(1.0, road->normalized().dot(Eigen::Vector3d::UnitY()))) * 180.0 / M_PI;
+  r.attitude_error_deg = AngleBetweenDeg(*road, Eigen::Vector3d::UnitY());
   if (held_height) r.height_ratio = 1.0 / road->norm() / *held_height;
   // The references outlive the restarts.
   EXPECT_EQ(refiner.road_height(), held_height);
@@ -281,8 +281,8 @@ TEST(WindowRefinerTest, RoadAttitudeAndHeightOutliveWindowRestarts) {
   const RoadAfterRestarts off = StreamRoadWithRestarts(60, without);
   std::printf(
       "after 60 anchors and 4 restarts: attitude error %.2f deg, height %.3f of the held "
-      "one (without the attitude prior: %.2f deg, %.3f)\n",
-      with.attitude_error_deg, with.height_ratio, off.attitude_error_deg, off.height_ratio);
+      "one (without the attitude prior, which holds no height: %.2f deg)\n",
+      with.attitude_error_deg, with.height_ratio, off.attitude_error_deg);
   EXPECT_LT(with.attitude_error_deg, 1.2);
   EXPECT_LT(with.attitude_error_deg, off.attitude_error_deg + 0.2);
   EXPECT_NEAR(with.height_ratio, 1.0, 0.02);
@@ -304,7 +304,7 @@ TEST(WindowRefinerTest, RoadReferencesFollowRescaleAndSurviveReset) {
   ASSERT_TRUE(refiner.road_height().has_value());
   ASSERT_TRUE(refiner.road_normal_cam().has_value());
   EXPECT_NEAR(*refiner.road_height(), 1.5, 0.015);
-  EXPECT_LT(std::acos(refiner.road_normal_cam()->dot(Eigen::Vector3d::UnitY())), 1e-3);
+  EXPECT_LT(AngleBetweenDeg(*refiner.road_normal_cam(), Eigen::Vector3d::UnitY()), RadToDeg(1e-3));
   const Eigen::Vector3d normal = *refiner.road_normal_cam();
   refiner.Rescale(2.0);
   refiner.Reset();
@@ -336,6 +336,11 @@ TEST(WindowRefinerTest, OptionsCheck) {
   EXPECT_EQ(o.Check().code(), StatusCode::kInvalidArgument);
   o = WindowRefinerOptions{};
   o.huber_k = 0;
+  EXPECT_EQ(o.Check().code(), StatusCode::kInvalidArgument);
+  o = WindowRefinerOptions{};
+  o.road_attitude_sigma_deg = 1.0;
+  EXPECT_TRUE(o.Check().ok());
+  o.road_attitude_sigma_deg = -1.0;
   EXPECT_EQ(o.Check().code(), StatusCode::kInvalidArgument);
 }
 

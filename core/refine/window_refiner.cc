@@ -399,7 +399,7 @@ void WindowRefiner::AddGaugeAndPriors(Problem* problem, size_t first, WindowRefi
         new ceres::AutoDiffCostFunction<RoadHeightResidual, 1, 3>(new RoadHeightResidual(
             road_height_.value_or(1.0 / road->second.norm()), options_.road_height_rel_sigma)),
         nullptr, road->second.data());
-    if (options_.road_attitude_sigma_deg > 0 && road_normal_cam_) {
+    if (hold && road_normal_cam_) {
       const Eigen::Matrix3d R_wr = anchors_[0].world_from_cam.R();
       const double sigma_rad = DegToRad(options_.road_attitude_sigma_deg);
       for (size_t k = first; k < wp.poses.size(); ++k) {

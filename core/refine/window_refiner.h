@@ -146,7 +146,8 @@ class WindowRefiner {
   Status Refine(WindowRefineReport* report);
 
   // Metric road height: from now on the road prior (c) uses this distance
-  // (trajectory units) instead of the held estimate.
+  // (trajectory units) instead of its estimate (the running one, or the held
+  // one with (e) on); Reset keeps it.
   void SetRoadHeight(double height) { road_height_ = height; }
 
   // Multiplies every length by s (poses, planes, priors).
