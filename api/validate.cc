@@ -491,6 +491,13 @@ Status ValidatePipelineOptions(const v1::PipelineOptions& p) {
       extension(p.has_init_max_baseline_s(), p.init_max_baseline_s(), "init_max_baseline_s"));
   SLAPSE_RETURN_IF_ERROR(
       extension(p.has_track_max_baseline_s(), p.track_max_baseline_s(), "track_max_baseline_s"));
+  if (p.has_road_attitude_sigma_deg() &&
+      !(Finite(p.road_attitude_sigma_deg()) && p.road_attitude_sigma_deg() >= 0 &&
+        p.road_attitude_sigma_deg() <= kMaxRoadAttitudeSigmaDeg)) {
+    return InvalidArgumentError("pipeline_options.road_attitude_sigma_deg must be in [0, " +
+                                Num(kMaxRoadAttitudeSigmaDeg) + "] deg (0 = off), got " +
+                                Num(p.road_attitude_sigma_deg()));
+  }
   auto positive = [](double v) { return Finite(v) && v > 0; };
   switch (p.scale_source()) {
     case v1::PipelineOptions::FIRST_STEP:

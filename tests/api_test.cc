@@ -39,6 +39,7 @@ void ExpectSameCarried(const PipelineOptions& a, const PipelineOptions& b) {
   EXPECT_EQ(a.init_max_baseline_s, b.init_max_baseline_s);
   EXPECT_EQ(a.track_max_baseline_s, b.track_max_baseline_s);
   EXPECT_EQ(a.refine.window_anchors, b.refine.window_anchors);
+  EXPECT_EQ(a.refine.road_attitude_sigma_deg, b.refine.road_attitude_sigma_deg);
 }
 
 // core -> proto -> core equals, and proto -> core -> proto equals.
@@ -88,6 +89,26 @@ TEST(PipelineOptionsRoundTrip, WindowRefine) {
   ExpectRoundTrips(m);
   p.set_refine_window_anchors(31);
   EXPECT_EQ(api::ValidatePipelineOptions(p).code(), StatusCode::kInvalidArgument);
+  // The road-attitude prior: unset is the struct's default, 0 (off) is
+  // carried, the range is checked.
+  p.Clear();
+  EXPECT_EQ(api::PipelineOptionsFromProto(p).refine.road_attitude_sigma_deg,
+            WindowRefinerOptions{}.road_attitude_sigma_deg);
+  PipelineOptions r;
+  r.refine.road_attitude_sigma_deg = 0.0;
+  ExpectRoundTrips(r);
+  r.refine.road_attitude_sigma_deg = 2.5;
+  ExpectRoundTrips(r);
+  p.set_road_attitude_sigma_deg(0.0);
+  EXPECT_TRUE(api::ValidatePipelineOptions(p).ok());
+  EXPECT_EQ(api::PipelineOptionsFromProto(p).refine.road_attitude_sigma_deg, 0.0);
+  p.set_road_attitude_sigma_deg(-0.5);
+  EXPECT_EQ(api::ValidatePipelineOptions(p).code(), StatusCode::kInvalidArgument);
+  p.set_road_attitude_sigma_deg(std::nan(""));
+  EXPECT_EQ(api::ValidatePipelineOptions(p).code(), StatusCode::kInvalidArgument);
+  p.set_road_attitude_sigma_deg(api::kMaxRoadAttitudeSigmaDeg + 1);
+  EXPECT_EQ(api::ValidatePipelineOptions(p).code(), StatusCode::kInvalidArgument);
+  p.clear_road_attitude_sigma_deg();
   p.set_refine_window_anchors(8);
   EXPECT_TRUE(api::ValidatePipelineOptions(p).ok());
 }

@@ -269,13 +269,13 @@ RoadAfterRestarts StreamRoadWithRestarts(int anchors, const WindowRefinerOptions
   return r;
 }
 
-// With the attitude prior on, the restarts take neither the drifted tilt nor
-// the drifted height: both references hold. The attitude's reference is the mean over solves from
-// the first window whose every pair saw the road; taken from the road's first solve alone (one 5 cm
-// baseline), it was 7 deg off here and held the road there (7.3 deg at the end).
+// With the attitude prior on (the default), the restarts take neither the
+// drifted tilt nor the drifted height: both references hold. They are the
+// mean over the first road_reference_solves full-window solves; taken from
+// the road's first solve alone (one 5 cm baseline), the attitude was 7 deg
+// off here and held the road there (7.3 deg at the end).
 TEST(WindowRefinerTest, RoadAttitudeAndHeightOutliveWindowRestarts) {
   WindowRefinerOptions on, without;
-  on.road_attitude_sigma_deg = 1.0;
   without.road_attitude_sigma_deg = 0;
   const RoadAfterRestarts with = StreamRoadWithRestarts(60, on);
   const RoadAfterRestarts off = StreamRoadWithRestarts(60, without);
@@ -288,18 +288,21 @@ TEST(WindowRefinerTest, RoadAttitudeAndHeightOutliveWindowRestarts) {
   EXPECT_NEAR(with.height_ratio, 1.0, 0.02);
 }
 
-// Rescale scales the held height, not the attitude; Reset keeps both.
+// The references are taken after road_reference_solves full-window solves,
+// then held; Rescale scales the height, not the attitude; Reset keeps both.
 TEST(WindowRefinerTest, RoadReferencesFollowRescaleAndSurviveReset) {
   const std::vector<WorldPlane> planes = Street(true);
-  WindowRefinerOptions on;
-  on.road_attitude_sigma_deg = 1.0;
+  const WindowRefinerOptions on;
   WindowRefiner refiner(TestIntrinsics(), on);
   std::mt19937 rng(5);
   refiner.Push(0, 0.0, TruePose(0), {}, {}, -1);
-  for (int k = 1; k < 8; ++k) {
+  // The window is full from anchor window_anchors - 1 on.
+  const int taken = on.window_anchors - 2 + on.road_reference_solves;
+  for (int k = 1; k <= taken + 2; ++k) {
     refiner.Push(k, k * kDtS, TruePose(k), Observe(planes, k, 0, &rng), Guesses(planes, k, 1.0), 0);
     WindowRefineReport report;
     ASSERT_TRUE(refiner.Refine(&report).ok());
+    EXPECT_EQ(refiner.road_normal_cam().has_value(), k >= taken) << "anchor " << k;
   }
   ASSERT_TRUE(refiner.road_height().has_value());
   ASSERT_TRUE(refiner.road_normal_cam().has_value());
@@ -338,9 +341,15 @@ TEST(WindowRefinerTest, OptionsCheck) {
   o.huber_k = 0;
   EXPECT_EQ(o.Check().code(), StatusCode::kInvalidArgument);
   o = WindowRefinerOptions{};
-  o.road_attitude_sigma_deg = 1.0;
+  o.road_attitude_sigma_deg = 0.0;
   EXPECT_TRUE(o.Check().ok());
   o.road_attitude_sigma_deg = -1.0;
+  EXPECT_EQ(o.Check().code(), StatusCode::kInvalidArgument);
+  o = WindowRefinerOptions{};
+  o.road_reference_solves = 0;
+  EXPECT_EQ(o.Check().code(), StatusCode::kInvalidArgument);
+  o = WindowRefinerOptions{};
+  o.reassociate_max_distance_ratio = 1.0;
   EXPECT_EQ(o.Check().code(), StatusCode::kInvalidArgument);
 }
 

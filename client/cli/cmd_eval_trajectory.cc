@@ -14,6 +14,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "api/validate.h"
 #include "client/cli/commands.h"
 #include "client/cli/flags.h"
 #include "core/common/timing.h"
@@ -98,6 +99,12 @@ int RunEvalTrajectory(int argc, char** argv) {
   app.add_option("--refine-window", eo.pipeline.refine.window_anchors,
                  "anchors in the refinement window (WindowRefinerOptions::window_anchors)")
       ->type_name("N")
+      ->capture_default_str();
+  app.add_option("--road-attitude-sigma-deg", eo.pipeline.refine.road_attitude_sigma_deg,
+                 "the refinement's prior on the road's attitude, per axis; 0 = off "
+                 "(WindowRefinerOptions::road_attitude_sigma_deg)")
+      ->type_name("DEG")
+      ->check(CLI::Range(0.0, api::kMaxRoadAttitudeSigmaDeg))
       ->capture_default_str();
   if (int rc = cl.Parse(argc, argv); rc >= 0) return rc;
   if (!cl.positional().empty()) {

@@ -212,6 +212,12 @@ int RunRun(int argc, char** argv) {
   app.add_option("--refine-window", po.refine.window_anchors, "anchors in the refinement window")
       ->type_name("N")
       ->capture_default_str();
+  app.add_option("--road-attitude-sigma-deg", po.refine.road_attitude_sigma_deg,
+                 "the refinement's prior on the road's attitude in the camera, per axis; "
+                 "0 = off (docs/METHOD.md)")
+      ->type_name("DEG")
+      ->check(CLI::Range(0.0, api::kMaxRoadAttitudeSigmaDeg))
+      ->capture_default_str();
   app.add_option("--motion-only-steps", po.motion_only_steps,
                  "track pairs with motion but no plane from their rotation and direction "
                  "(docs/METHOD.md)")

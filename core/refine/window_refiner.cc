@@ -132,11 +132,13 @@ Status WindowRefinerOptions::Check(const std::string& who) const {
   if (window_anchors < 3 || max_iterations < 1 || max_mbs_per_plane < 4 || !(extra_sigma_px > 0) ||
       !(huber_k > 0) || !(gauge_step_rel_sigma > 0) || !(road_height_rel_sigma > 0) ||
       !(speed_change_rel_per_sqrt_s > 0) || !(angular_rate_change_rad_s_per_sqrt_s > 0) ||
-      !(road_attitude_sigma_deg >= 0)) {
+      !(road_attitude_sigma_deg >= 0) || road_reference_solves < 1 ||
+      !(reassociate_max_angle_deg > 0) || !(reassociate_max_distance_ratio > 1)) {
     return InvalidArgumentError(who +
                                 ": window_anchors must be >= 3, max_iterations >= 1, "
-                                "max_mbs_per_plane >= 4, every sigma > 0 (road_attitude_sigma_deg "
-                                ">= 0)");
+                                "max_mbs_per_plane >= 4, road_reference_solves >= 1, every sigma "
+                                "> 0 (road_attitude_sigma_deg >= 0), reassociate_max_angle_deg "
+                                "> 0 and reassociate_max_distance_ratio > 1");
   }
   return Status::Ok();
 }
@@ -315,13 +317,30 @@ Status WindowRefiner::Refine(WindowRefineReport* report) {
   if (const auto road = RoadInNewest(); road.has_value()) {
     rep.road_in_window = true;
     rep.road_distance = 1.0 / road->norm();
-    if (road_normal_cam_ && rep.road_pairs > 0) {  // (e)'s reference: the mean over solves
-      ++road_normal_solves_;
-      const double w = 1.0 / static_cast<double>(road_normal_solves_);
-      road_normal_cam_ = ((1.0 - w) * *road_normal_cam_ + w * road->normalized()).normalized();
-    }
   }
+  AccumulateRoadReferences(wp, rep);
   return Status::Ok();
+}
+
+// (c) and (e)'s references: the mean of the refined road (unit normal, and
+// distance from the oldest camera) over the first road_reference_solves
+// solves of a full window in which at least half the pairs saw the road;
+// those solves run without (e), with (c) at the previous estimate. Held from
+// then on: averaging later solves, which the prior pulls to the reference,
+// would only confirm it.
+void WindowRefiner::AccumulateRoadReferences(const Problem& wp, const WindowRefineReport& rep) {
+  if (!(options_.road_attitude_sigma_deg > 0) || road_normal_cam_) return;
+  const int pairs = options_.window_anchors - 1;
+  if (static_cast<int>(anchors_.size()) < options_.window_anchors || 2 * rep.road_pairs < pairs) {
+    return;
+  }
+  const auto road = wp.pis.find(road_id_);
+  if (road == wp.pis.end() || !(road->second.norm() > 0)) return;
+  road_normal_sum_ += road->second.normalized();
+  road_height_sum_ += 1.0 / road->second.norm();
+  if (++road_reference_solves_ < options_.road_reference_solves) return;
+  road_normal_cam_ = road_normal_sum_.normalized();
+  if (!road_height_) road_height_ = road_height_sum_ / road_reference_solves_;
 }
 
 void WindowRefiner::AddTransferResiduals(Problem* problem, size_t first,
@@ -391,10 +410,6 @@ void WindowRefiner::AddGaugeAndPriors(Problem* problem, size_t first, WindowRefi
     // Held only with the attitude prior: held alone, it made the MPEG-2
     // tuning drives worse (docs/METHOD.md "The road's attitude").
     const bool hold = options_.road_attitude_sigma_deg > 0;
-    if (!road_height_ && hold) road_height_ = 1.0 / road->second.norm();
-    if (!road_normal_cam_ && hold && rep->road_pairs + 1 >= options_.window_anchors) {
-      road_normal_cam_ = road->second.normalized();
-    }
     wp.problem.AddResidualBlock(
         new ceres::AutoDiffCostFunction<RoadHeightResidual, 1, 3>(new RoadHeightResidual(
             road_height_.value_or(1.0 / road->second.norm()), options_.road_height_rel_sigma)),
@@ -451,6 +466,7 @@ void WindowRefiner::Rescale(double s) {
   if (before_) before_->world_from_cam.translation *= s;
   for (auto& [id, plane] : planes_world_) plane.distance *= s;
   if (road_height_) *road_height_ *= s;
+  road_height_sum_ *= s;
 }
 
 }  // namespace slapse

@@ -30,10 +30,10 @@
 //      old ones;
 //  (c) the road: its distance from the oldest camera (the camera height) has
 //      a prior with road_height_rel_sigma at the metric camera height, or
-//      with (e) on at the height the road had when it first took part in a
-//      solve, held from then on (a car's camera stays at one height above
-//      the road; a prior at each solve's previous estimate, the default,
-//      lets the height and with it the scale random-walk);
+//      with (e) on at the reference height (below), held from then on (a
+//      car's camera stays at one height above the road; a prior at each
+//      solve's previous estimate, used until then and with (e) off, lets
+//      the height and with it the scale random-walk);
 //  (d) the motion prior: consecutive steps' velocities (t / dt, in the body
 //      frame) and angular velocities differ by a random walk (sigma ~
 //      sqrt(dt)), so a step that sees only new planes cannot take a new
@@ -41,9 +41,10 @@
 //  (e) the road's attitude: a car-mounted camera sees the road under one
 //      attitude (its mount's pitch and roll; the car pitches and rolls on its
 //      suspension by about a degree), so each pose's road normal has a prior
-//      at a reference normal, with road_attitude_sigma_deg per axis (0, the
-//      default: off). The reference is taken from the first window whose
-//      every pair saw the road, then averaged over the solves that see it.
+//      at a reference normal, with road_attitude_sigma_deg per axis (0:
+//      off). The references of (c) and (e) are the mean road over the first
+//      road_reference_solves solves of a full window in which at least half
+//      the pairs saw the road (solved without (e)), then held.
 //      Without it, short baselines (one-frame H.264 IPPP pairs) let the
 //      cameras' pitch relative to the road drift by degrees over seconds, and
 //      a tilted road changes every road block's depth, hence the step lengths
@@ -80,9 +81,14 @@ struct WindowRefinerOptions {
   double gauge_step_rel_sigma = 0.002;  // (a): oldest step's length, relative
   double road_height_rel_sigma = 0.01;  // (c): road distance, relative
   // (e): road normal per camera, deg per axis; 0 = off (then (c) is at each
-  // solve's previous estimate). Off by default: on, it made one small H.264
-  // IPPP intersection drive 2.5x worse (docs/METHOD.md "The road's attitude").
-  double road_attitude_sigma_deg = 0.0;
+  // solve's previous estimate and nothing is held).
+  double road_attitude_sigma_deg = 1.0;
+  // (c) and (e)'s references: the mean road over this many solves of a full
+  // window in which at least half the pairs saw the road (>= 1). One solve
+  // of a short-baseline window is off by a degree or two; 8 (0.27 s of
+  // one-frame pairs at 30 fps) averaged it out on the tuning drives, before
+  // the drift the prior is for (docs/METHOD.md "The road's attitude").
+  int road_reference_solves = 8;
   // (d): the velocities' random walk, as in the EKF's process model: over
   // dt seconds the body-frame velocity changes by speed_change_rel_per_sqrt_s
   // * sqrt(dt) relative to the speed (0.15: 5.5 % over one 30 fps IBBBP
@@ -99,9 +105,9 @@ struct WindowRefinerOptions {
   double reassociate_max_distance_ratio = 1.3;
 
   // InvalidArgument (prefixed with `who`) unless window_anchors >= 3,
-  // max_iterations >= 1, max_mbs_per_plane >= 4, every sigma (but
-  // road_attitude_sigma_deg, >= 0) and the angle are > 0 and the distance
-  // ratio > 1.
+  // max_iterations >= 1, max_mbs_per_plane >= 4, road_reference_solves >= 1,
+  // every sigma (but road_attitude_sigma_deg, >= 0) and the angle are > 0
+  // and the distance ratio > 1.
   Status Check(const std::string& who = "WindowRefinerOptions") const;
 };
 
@@ -146,8 +152,8 @@ class WindowRefiner {
   Status Refine(WindowRefineReport* report);
 
   // Metric road height: from now on the road prior (c) uses this distance
-  // (trajectory units) instead of its estimate (the running one, or the held
-  // one with (e) on); Reset keeps it.
+  // (trajectory units) instead of its estimate (the running one, or the
+  // reference with (e) on); Reset keeps it.
   void SetRoadHeight(double height) { road_height_ = height; }
 
   // Multiplies every length by s (poses, planes, priors).
@@ -156,7 +162,8 @@ class WindowRefiner {
   // road references of (c) and (e) stay: they belong to the trajectory, which
   // continues.
   void Reset();
-  // The held references (nullopt until the road first took part in a solve).
+  // The references (c) and (e) hold; nullopt until they are taken (the
+  // height: or set by SetRoadHeight).
   std::optional<double> road_height() const { return road_height_; }
   std::optional<Eigen::Vector3d> road_normal_cam() const { return road_normal_cam_; }
 
@@ -180,6 +187,7 @@ class WindowRefiner {
   struct Problem;
   void AddTransferResiduals(Problem* wp, size_t first, WindowRefineReport* rep) const;
   void AddGaugeAndPriors(Problem* wp, size_t first, WindowRefineReport* rep);
+  void AccumulateRoadReferences(const Problem& wp, const WindowRefineReport& rep);
 
   Intrinsics intrinsics_;
   WindowRefinerOptions options_;
@@ -192,7 +200,10 @@ class WindowRefiner {
   // (trajectory units) and (e) the road's unit normal in the camera.
   std::optional<double> road_height_;
   std::optional<Eigen::Vector3d> road_normal_cam_;
-  int64_t road_normal_solves_ = 0;  // solves averaged into road_normal_cam_
+  // Sums over the solves averaged into them so far (until they are held).
+  Eigen::Vector3d road_normal_sum_ = Eigen::Vector3d::Zero();
+  double road_height_sum_ = 0.0;  // trajectory units, scaled by Rescale
+  int road_reference_solves_ = 0;
   // The anchor before the window (constant): the oldest step's velocity prior.
   std::optional<Anchor> before_;
 };
