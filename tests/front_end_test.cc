@@ -121,5 +121,22 @@ TEST_F(FrontEndTest, ResetForgetsThePriorAndTheTracks) {
   EXPECT_GE(pairs, 7);
 }
 
+// Pipeline::Finish's step is the pair an extended step handed back: counted
+// once, as tracked or not, and no longer as extended.
+TEST(PipelineStepCountsTest, FinishReplacesTheExtendedStep) {
+  PipelineStep tracked, extended;
+  tracked.tracking = true;
+  extended.extended = true;
+  PipelineStepCounts counts;
+  counts.Add(tracked);
+  counts.Add(extended);
+  EXPECT_EQ(counts.pairs, 2);
+  EXPECT_EQ(counts.extended, 1);
+  counts.AddFinish(tracked);
+  EXPECT_EQ(counts.pairs, 2);
+  EXPECT_EQ(counts.tracked, 2);
+  EXPECT_EQ(counts.extended, 0);
+}
+
 }  // namespace
 }  // namespace slapse

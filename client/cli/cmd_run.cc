@@ -283,14 +283,11 @@ int RunRun(int argc, char** argv) {
   Pipeline pipeline(*intrinsics, info.mv_sigma_px(), po);
   std::vector<PlaneEstimate> plane_estimates;
   const bool progress = !quiet && isatty(STDERR_FILENO);
-  int steps = 0, tracked = 0, extended = 0;
+  PipelineStepCounts counts;
   std::string last_note;   // why the last untracked step did not track
   std::string scale_note;  // the last step's, when it said something
-  auto count = [&](const PipelineStep& s) {
+  auto record = [&](const PipelineStep& s) {
     if (!s.note.empty()) last_note = s.note;
-    ++steps;
-    tracked += s.tracking;
-    extended += s.extended;
     if (!s.scale_note.empty()) scale_note = s.scale_note;
     if (steps_csv) WriteStepRow(steps_csv.get(), s, pipeline.trajectory());
     AppendPlaneEstimates(s.later_index, s.planes, s.extracted, s.extracted_filter_ids,
@@ -303,16 +300,18 @@ int RunRun(int argc, char** argv) {
     if (!step.ok()) return Fail("run", step.status().ToString());
     if (progress && frame.index % 15 == 0) {
       std::fprintf(stderr, "\rframe %lld  t %.1f s  anchor pairs %d (tracking %d)  planes %zu   ",
-                   static_cast<long long>(frame.index), frame.timestamp_s, steps, tracked,
-                   pipeline.plane_map().size());
+                   static_cast<long long>(frame.index), frame.timestamp_s, counts.pairs,
+                   counts.tracked, pipeline.plane_map().size());
     }
-    if (step->has_value()) count(**step);
+    if (step->has_value()) {
+      counts.Add(**step);
+      record(**step);
+    }
   }
-  // A pair still handed back at the end (its frames' poses): processed as it is, counted once.
+  // A pair still handed back at the end (its frames' poses): processed as it is.
   if (std::optional<PipelineStep> last = pipeline.Finish(); last.has_value()) {
-    --steps;
-    --extended;
-    count(*last);
+    counts.AddFinish(*last);
+    record(*last);
   }
   if (progress) std::fprintf(stderr, "\n");
   const bool stream_ok = end.code() == StatusCode::kOutOfRange;
@@ -328,8 +327,8 @@ int RunRun(int argc, char** argv) {
   std::printf(
       "tracked    %d of %d anchor pairs (%d extended), %zu anchor poses, %zu planes in "
       "the map (%s)\n",
-      tracked, steps, extended, pipeline.trajectory().size(), pipeline.plane_map().size(),
-      pipeline.metric() ? "metres" : "up to scale: first step = 1");
+      counts.tracked, counts.pairs, counts.extended, pipeline.trajectory().size(),
+      pipeline.plane_map().size(), pipeline.metric() ? "metres" : "up to scale: first step = 1");
   std::map<PoseKind, int> kinds;
   for (const FramePose& p : pipeline.poses()) ++kinds[p.quality.kind];
   std::printf(
@@ -342,10 +341,11 @@ int RunRun(int argc, char** argv) {
   if (pipeline.trajectory().empty()) {
     // Never a silent empty result: say why (a still camera, a stream too short or too small).
     std::printf("no poses   %s\n",
-                steps == 0 ? "no anchor pair was closed (too few frames, or no two anchor frames)"
-                           : ("none of the anchor pairs tracked; the last: " +
-                              (last_note.empty() ? std::string("(no reason given)") : last_note))
-                                 .c_str());
+                counts.pairs == 0
+                    ? "no anchor pair was closed (too few frames, or no two anchor frames)"
+                    : ("none of the anchor pairs tracked; the last: " +
+                       (last_note.empty() ? std::string("(no reason given)") : last_note))
+                          .c_str());
   }
   MapAndErrors(pipeline, gt, plane_estimates, out_dir);
   std::printf(

@@ -171,6 +171,25 @@ struct PipelineStep {
   std::vector<FramePose> frame_poses;
 };
 
+// A run's anchor pairs, each counted once: the step Pipeline::Finish returns
+// is the same pair as the extended step that handed it back, so it replaces
+// that one (`run` and the trajectory evaluation report these counts).
+struct PipelineStepCounts {
+  int pairs = 0, tracked = 0, extended = 0;
+  // A step of Pipeline::Push.
+  void Add(const PipelineStep& step) {
+    ++pairs;
+    tracked += step.tracking;
+    extended += step.extended;
+  }
+  // The step of Pipeline::Finish.
+  void AddFinish(const PipelineStep& step) {
+    --pairs;
+    --extended;
+    Add(step);
+  }
+};
+
 class Pipeline {
  public:
   // sigma_px: the stream's MV error (StreamInfo::mv_sigma_px()).

@@ -32,10 +32,9 @@ struct Run {
   std::vector<TimedPose> frame_poses;  // every posed frame (Pipeline::poses())
   std::vector<PlaneEstimate> planes;
   bool metric = false;
-  int pairs = 0, tracked = 0;
+  PipelineStepCounts counts;    // extended: pairs handed back for a longer baseline
   int motion_only_anchors = 0;  // anchors posed without a plane (PoseKind::kMotionOnly)
   int coasting_anchors = 0;     // anchors posed by the motion model (PoseKind::kCoasting)
-  int extended_pairs = 0;       // pairs handed back for a longer baseline (PipelineStep::extended)
   std::map<std::string, int> notes;
 };
 
@@ -43,23 +42,22 @@ StatusOr<Run> RunPipeline(const std::vector<FrameRecord>& frames, const Intrinsi
                           double sigma_px, const PipelineOptions& options) {
   Run run;
   Pipeline pipeline(intrinsics, sigma_px, options);
-  auto count = [&](const PipelineStep& s) {
-    ++run.pairs;
-    run.tracked += s.tracking;
-    run.extended_pairs += s.extended;
+  auto record = [&](const PipelineStep& s) {
     if (!s.tracking && !s.extended && !s.note.empty()) ++run.notes[s.note];
     AppendPlaneEstimates(s.later_index, s.planes, s.extracted, s.extracted_filter_ids, &run.planes);
   };
   for (const FrameRecord& f : frames) {
     auto step = pipeline.Push(f);
     if (!step.ok()) return step.status();
-    if (step->has_value()) count(**step);
+    if (step->has_value()) {
+      run.counts.Add(**step);
+      record(**step);
+    }
   }
-  // A pair still handed back at the end: processed as it is, counted once.
+  // A pair still handed back at the end: processed as it is.
   if (std::optional<PipelineStep> last = pipeline.Finish(); last.has_value()) {
-    --run.pairs;
-    --run.extended_pairs;
-    count(*last);
+    run.counts.AddFinish(*last);
+    record(*last);
   }
   for (const auto& p : pipeline.trajectory()) run.poses.push_back(p);
   run.frame_poses = TimedPosesOf(pipeline.poses());
@@ -142,11 +140,11 @@ StatusOr<DriveResult> EvaluateDrive(const DriveSpec& spec, const DriveEvalOption
   auto base = RunPipeline(frames, gt->intrinsics, sigma, po);
   if (!base.ok()) return base.status();
   r.posed_frames = static_cast<int>(base->frame_poses.size());
-  r.anchor_pairs = base->pairs;
-  r.tracked_pairs = base->tracked;
+  r.anchor_pairs = base->counts.pairs;
+  r.tracked_pairs = base->counts.tracked;
   r.motion_only_anchors = base->motion_only_anchors;
   r.coasting_anchors = base->coasting_anchors;
-  r.extended_pairs = base->extended_pairs;
+  r.extended_pairs = base->counts.extended;
   int most = 0;
   for (const auto& [note, n] : base->notes) {
     if (n > most) most = n, r.note = note;
