@@ -69,8 +69,8 @@ TEST_F(FrontEndTest, ComputesWhatTheStagesChainedByHandCompute) {
     ASSERT_EQ(step.has_value(), pair.has_value());
     if (!pair.has_value()) continue;
     ++pairs;
-    auto inf = ThresholdInfinity(pair->correspondences, k, InfinityOptions(),
-                                 tracker.PriorFor(*pair));
+    auto inf =
+        ThresholdInfinity(pair->correspondences, k, InfinityOptions(), tracker.PriorFor(*pair));
     tracker.Record(*pair, inf.ok() ? &*inf : nullptr);
     ASSERT_TRUE(inf.ok() && step->infinity.ok());
     EXPECT_EQ(step->pair.later_index, pair->later_index);
