@@ -317,6 +317,31 @@ TEST(WindowRefinerTest, RoadReferencesFollowRescaleAndSurviveReset) {
   EXPECT_EQ(*refiner.road_normal_cam(), normal);
 }
 
+// A window that cannot fit its vectors (here 40 px of noise on every block)
+// is not used: rejected, the poses as pushed. The same pair with 0.25 px of
+// noise is solved.
+TEST(WindowRefinerTest, ASolveThatDoesNotFitIsRejected) {
+  const std::vector<WorldPlane> planes = Street(true);
+  for (const double noise_px : {40.0, 0.25}) {
+    WindowRefiner refiner(TestIntrinsics());
+    std::mt19937 rng(9);
+    refiner.Push(0, 0.0, TruePose(0), {}, {}, -1);
+    const Rigid3d guess = TruePose(1);
+    refiner.Push(1, kDtS, guess, Observe(planes, 1, noise_px, &rng), Guesses(planes, 1, 1.0), 0);
+    WindowRefineReport report;
+    ASSERT_TRUE(refiner.Refine(&report).ok());
+    std::printf("noise %.2f px: final rms %.2f\n", noise_px, report.final_rms);
+    const bool fits = noise_px < 1.0;
+    EXPECT_EQ(report.solved, fits);
+    EXPECT_EQ(report.rejected, !fits);
+    EXPECT_EQ(report.final_rms > WindowRefinerOptions{}.max_final_rms, !fits);
+    if (!fits) {
+      EXPECT_EQ(refiner.world_from_cam(1).translation, guess.translation);
+      EXPECT_TRUE(refiner.world_from_cam(1).rotation.isApprox(guess.rotation, 0.0));
+    }
+  }
+}
+
 TEST(WindowRefinerTest, WindowIsBounded) {
   const std::vector<WorldPlane> planes = Street(true);
   WindowRefinerOptions o;
@@ -350,6 +375,9 @@ TEST(WindowRefinerTest, OptionsCheck) {
   EXPECT_EQ(o.Check().code(), StatusCode::kInvalidArgument);
   o = WindowRefinerOptions{};
   o.reassociate_max_distance_ratio = 1.0;
+  EXPECT_EQ(o.Check().code(), StatusCode::kInvalidArgument);
+  o = WindowRefinerOptions{};
+  o.max_final_rms = 0.0;
   EXPECT_EQ(o.Check().code(), StatusCode::kInvalidArgument);
 }
 

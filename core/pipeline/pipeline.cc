@@ -427,6 +427,10 @@ void Pipeline::RefineWindow(const AnchorPair& pair, PipelineStep* step) {
     refiner_.Reset();
     return;
   }
+  if (step->refine.rejected) {  // the window does not fit its vectors: restart it
+    refiner_.Reset();
+    return;
+  }
   if (!step->refine.solved) return;
   // The emitted pose: the last emitted pose composed with the window's newest
   // step. Poses already emitted are not revised (final once a step emitted

@@ -133,12 +133,13 @@ Status WindowRefinerOptions::Check(const std::string& who) const {
       !(huber_k > 0) || !(gauge_step_rel_sigma > 0) || !(road_height_rel_sigma > 0) ||
       !(speed_change_rel_per_sqrt_s > 0) || !(angular_rate_change_rad_s_per_sqrt_s > 0) ||
       !(road_attitude_sigma_deg >= 0) || road_reference_solves < 1 ||
-      !(reassociate_max_angle_deg > 0) || !(reassociate_max_distance_ratio > 1)) {
+      !(reassociate_max_angle_deg > 0) || !(reassociate_max_distance_ratio > 1) ||
+      !(max_final_rms > 0)) {
     return InvalidArgumentError(who +
                                 ": window_anchors must be >= 3, max_iterations >= 1, "
                                 "max_mbs_per_plane >= 4, road_reference_solves >= 1, every sigma "
                                 "> 0 (road_attitude_sigma_deg >= 0), reassociate_max_angle_deg "
-                                "> 0 and reassociate_max_distance_ratio > 1");
+                                "and max_final_rms > 0, reassociate_max_distance_ratio > 1");
   }
   return Status::Ok();
 }
@@ -298,10 +299,14 @@ Status WindowRefiner::Refine(WindowRefineReport* report) {
   if (!summary.IsSolutionUsable() || !std::isfinite(summary.final_cost)) {
     return InternalError("window refinement failed: " + summary.message);
   }
-  rep.solved = true;
   rep.residuals = wp.residuals;
   rep.initial_rms = std::sqrt(2.0 * summary.initial_cost / wp.residuals);
   rep.final_rms = std::sqrt(2.0 * summary.final_cost / wp.residuals);
+  if (rep.final_rms > options_.max_final_rms) {
+    rep.rejected = true;
+    return Status::Ok();
+  }
+  rep.solved = true;
   for (size_t k = 1; k < n; ++k) {
     anchors_[k].world_from_cam = Rigid3d(wp.poses[first + k].q.normalized(), wp.poses[first + k].c);
   }
