@@ -11,13 +11,20 @@
 
 namespace slapse {
 
+// The rotation is a unit quaternion: the constructors normalise it (Eigen's
+// q * x and toRotationMatrix assume |q| = 1; a composition multiplies the
+// norms, so an error of 1e-5 grew geometrically over a few hundred composed
+// steps, to |q| = 31 and a trajectory 1e15 m long on a 60 fps H.264 drive).
+// A matrix is taken to its nearest rotation's quaternion the same way.
 struct Rigid3d {
   Eigen::Quaterniond rotation = Eigen::Quaterniond::Identity();
   Eigen::Vector3d translation = Eigen::Vector3d::Zero();
 
   Rigid3d() = default;
-  Rigid3d(const Eigen::Quaterniond& r, const Eigen::Vector3d& t) : rotation(r), translation(t) {}
-  Rigid3d(const Eigen::Matrix3d& r, const Eigen::Vector3d& t) : rotation(r), translation(t) {}
+  Rigid3d(const Eigen::Quaterniond& r, const Eigen::Vector3d& t)
+      : rotation(r.normalized()), translation(t) {}
+  Rigid3d(const Eigen::Matrix3d& r, const Eigen::Vector3d& t)
+      : rotation(Eigen::Quaterniond(r).normalized()), translation(t) {}
 
   Eigen::Matrix3d R() const { return rotation.toRotationMatrix(); }
   Eigen::Vector3d operator*(const Eigen::Vector3d& x_a) const {
