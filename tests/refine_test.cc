@@ -8,6 +8,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <map>
 #include <optional>
 #include <random>
@@ -359,26 +360,23 @@ TEST(WindowRefinerTest, WindowIsBounded) {
 
 TEST(WindowRefinerTest, OptionsCheck) {
   EXPECT_TRUE(WindowRefinerOptions{}.Check().ok());
-  WindowRefinerOptions o;
-  o.window_anchors = 2;
-  EXPECT_EQ(o.Check().code(), StatusCode::kInvalidArgument);
-  o = WindowRefinerOptions{};
-  o.huber_k = 0;
-  EXPECT_EQ(o.Check().code(), StatusCode::kInvalidArgument);
-  o = WindowRefinerOptions{};
-  o.road_attitude_sigma_deg = 0.0;
-  EXPECT_TRUE(o.Check().ok());
-  o.road_attitude_sigma_deg = -1.0;
-  EXPECT_EQ(o.Check().code(), StatusCode::kInvalidArgument);
-  o = WindowRefinerOptions{};
-  o.road_reference_solves = 0;
-  EXPECT_EQ(o.Check().code(), StatusCode::kInvalidArgument);
-  o = WindowRefinerOptions{};
-  o.reassociate_max_distance_ratio = 1.0;
-  EXPECT_EQ(o.Check().code(), StatusCode::kInvalidArgument);
-  o = WindowRefinerOptions{};
-  o.max_final_rms = 0.0;
-  EXPECT_EQ(o.Check().code(), StatusCode::kInvalidArgument);
+  WindowRefinerOptions off;
+  off.road_attitude_sigma_deg = 0.0;
+  EXPECT_TRUE(off.Check().ok());
+  // Each of these alone is refused.
+  const std::vector<std::function<void(WindowRefinerOptions*)>> bad = {
+      [](WindowRefinerOptions* o) { o->window_anchors = 2; },
+      [](WindowRefinerOptions* o) { o->huber_k = 0; },
+      [](WindowRefinerOptions* o) { o->road_attitude_sigma_deg = -1.0; },
+      [](WindowRefinerOptions* o) { o->road_reference_solves = 0; },
+      [](WindowRefinerOptions* o) { o->reassociate_max_distance_ratio = 1.0; },
+      [](WindowRefinerOptions* o) { o->max_final_rms = 0.0; },
+  };
+  for (size_t i = 0; i < bad.size(); ++i) {
+    WindowRefinerOptions o;
+    bad[i](&o);
+    EXPECT_EQ(o.Check().code(), StatusCode::kInvalidArgument) << "case " << i;
+  }
 }
 
 // PlaneTransferCost's analytic Jacobian against Ceres' automatic
