@@ -52,6 +52,15 @@ struct Cell {
 
 using Table = std::array<std::array<Cell, kFlowBins>, kKinds>;
 
+void Append(const Table& from, Table* to) {
+  for (int k = 0; k < kKinds; ++k) {
+    for (int b = 0; b < kFlowBins; ++b) {
+      const std::vector<float>& e = from[k][b].errors_px;
+      (*to)[k][b].errors_px.insert((*to)[k][b].errors_px.end(), e.begin(), e.end());
+    }
+  }
+}
+
 void PrintTable(const Table& t) {
   std::printf("  %-11s %-8s %8s  %8s  %8s\n", "kind", "flow px", "vectors", "<= 2 px", "median px");
   for (int k = 0; k < kKinds; ++k) {
@@ -102,10 +111,10 @@ int main(int argc, char** argv) {
     while ((*reader)->Next(&frame).ok()) {
       if (frame.corrupt || frame.index >= static_cast<int64_t>(gt->frames.size())) continue;
       AddFrame(*gt, frame, &table);
-      AddFrame(*gt, frame, &all);
     }
     std::printf("%s\n", dir.c_str());
     PrintTable(table);
+    Append(table, &all);
   }
   if (argc > 2) {
     std::printf("all\n");

@@ -172,8 +172,8 @@ RelativePoseRefineReport RefineRelativePose(const std::vector<Eigen::Vector3d>& 
     return report;
   }
   report.success = true;
-  // Re-orthonormalise R (products of Exp steps drift by rounding only).
-  report.later_from_earlier = Rigid3d(Eigen::Quaterniond(R).normalized(), t);
+  // Re-orthonormalised by Rigid3d (products of Exp steps drift by rounding only).
+  report.later_from_earlier = Rigid3d(R, t);
   return report;
 }
 

@@ -308,7 +308,7 @@ Status WindowRefiner::Refine(WindowRefineReport* report) {
   }
   rep.solved = true;
   for (size_t k = 1; k < n; ++k) {
-    anchors_[k].world_from_cam = Rigid3d(wp.poses[first + k].q.normalized(), wp.poses[first + k].c);
+    anchors_[k].world_from_cam = Rigid3d(wp.poses[first + k].q, wp.poses[first + k].c);
   }
   for (const auto& [id, pi] : wp.pis) {
     planes_world_[id] = TransformPlane(world_from_r, Plane3d::FromInverseDepth(pi));
@@ -407,19 +407,18 @@ void WindowRefiner::AddGaugeAndPriors(Problem* problem, size_t first, WindowRefi
             new StepLengthResidual(c0, length, options_.gauge_step_rel_sigma)),
         nullptr, wp.poses[first + 1].c.data());
   }
-  // (c) the road's height and (e) its attitude, once it took part in a solve
-  // (or is metric): the references are taken then and held.
+  // (c) the road's height, once it took part in a solve (or is metric), and
+  // (e) its attitude, once the references are taken (AccumulateRoadReferences:
+  // only with (e) on; the height held alone made the MPEG-2 tuning drives
+  // worse, docs/METHOD.md "The road's attitude").
   const auto road = wp.pis.find(road_id_);
   if (road != wp.pis.end() && rep->road_pairs > 0 &&
       (road_height_.has_value() || plane_solves_.count(road_id_))) {
-    // Held only with the attitude prior: held alone, it made the MPEG-2
-    // tuning drives worse (docs/METHOD.md "The road's attitude").
-    const bool hold = options_.road_attitude_sigma_deg > 0;
     wp.problem.AddResidualBlock(
         new ceres::AutoDiffCostFunction<RoadHeightResidual, 1, 3>(new RoadHeightResidual(
             road_height_.value_or(1.0 / road->second.norm()), options_.road_height_rel_sigma)),
         nullptr, road->second.data());
-    if (hold && road_normal_cam_) {
+    if (road_normal_cam_) {
       const Eigen::Matrix3d R_wr = anchors_[0].world_from_cam.R();
       const double sigma_rad = DegToRad(options_.road_attitude_sigma_deg);
       for (size_t k = first; k < wp.poses.size(); ++k) {

@@ -119,7 +119,7 @@ StatusOr<CameraPath> GenerateCameraPath(const Scene& scene, const PathOptions& o
     const double heading = (cl.HeadingIntegral(s + w) - cl.HeadingIntegral(s - w)) / (2.0 * w);
     const Eigen::Matrix3d r =
         WorldFromCamRotation(heading, path.pitch_down_deg * kDeg + pitch_vib(t), roll_vib(t));
-    return Rigid3d(Eigen::Quaterniond(r).normalized(), pos);
+    return Rigid3d(r, pos);
   };
   double s = o.start_s_m;
   Eigen::Vector3d prev_pos = Eigen::Vector3d::Zero();
