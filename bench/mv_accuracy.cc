@@ -6,8 +6,12 @@
 // TransferThroughPlane): the error is |x + d - x_true|, px. Rows: plane kind
 // x the true displacement's length |x_true - x| (a B frame's vectors span one
 // to three frames, a P frame's one or the anchor distance). A row says how
-// many vectors there are, how many are within 2 px of the truth, and the
-// median error. Reading vectors only (no pipeline): what the method is given.
+// many vectors there are, how many are within 2 px of the truth, the median
+// error, and the median length bias: the vector's component along the true
+// displacement over the true length, minus 1 (vectors whose true
+// displacement is >= 1 px; negative: the codec's vectors are too short, which
+// a plane's fitted distance and a road's height would inherit). Reading
+// vectors only (no pipeline): what the method is given.
 //   build/bench/mv_accuracy DRIVE_DIR [DRIVE_DIR ...]
 #include <algorithm>
 #include <array>
@@ -21,7 +25,7 @@
 
 namespace {
 
-constexpr std::array<double, 6> kFlowEdgesPx = {0, 4, 8, 16, 32, 64};
+constexpr std::array<double, 8> kFlowEdgesPx = {0, 1, 2, 4, 8, 16, 32, 64};
 constexpr int kFlowBins = static_cast<int>(kFlowEdgesPx.size());  // the last is open
 constexpr int kKinds = 5;                                         // slapse::PlaneKind
 
@@ -31,14 +35,20 @@ int FlowBin(double flow_px) {
   return b;
 }
 
+double Median(std::vector<float> v) {
+  if (v.empty()) return std::nan("");
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2];
+}
+
 struct Cell {
   std::vector<float> errors_px;
+  std::vector<float> length_bias;  // (d_codec . u_true) / |d_true| - 1
   void Print(const char* kind, int bin) const {
     if (errors_px.empty()) return;
-    std::vector<float> e = errors_px;
+    const std::vector<float>& e = errors_px;
     const size_t n = e.size();
-    std::nth_element(e.begin(), e.begin() + n / 2, e.end());
-    const double median = e[n / 2];
+    const double median = Median(e);
     const size_t good = std::count_if(e.begin(), e.end(), [](float v) { return v <= 2.0f; });
     char range[32];
     if (bin + 1 < kFlowBins) {
@@ -46,7 +56,8 @@ struct Cell {
     } else {
       std::snprintf(range, sizeof range, ">= %g", kFlowEdgesPx[bin]);
     }
-    std::printf("  %-11s %-8s %8zu  %6.1f %%  %8.2f\n", kind, range, n, 100.0 * good / n, median);
+    std::printf("  %-11s %-8s %8zu  %6.1f %%  %8.2f  %+8.1f %%\n", kind, range, n, 100.0 * good / n,
+                median, 100.0 * Median(length_bias));
   }
 };
 
@@ -55,14 +66,17 @@ using Table = std::array<std::array<Cell, kFlowBins>, kKinds>;
 void Append(const Table& from, Table* to) {
   for (int k = 0; k < kKinds; ++k) {
     for (int b = 0; b < kFlowBins; ++b) {
-      const std::vector<float>& e = from[k][b].errors_px;
-      (*to)[k][b].errors_px.insert((*to)[k][b].errors_px.end(), e.begin(), e.end());
+      const Cell& c = from[k][b];
+      Cell& d = (*to)[k][b];
+      d.errors_px.insert(d.errors_px.end(), c.errors_px.begin(), c.errors_px.end());
+      d.length_bias.insert(d.length_bias.end(), c.length_bias.begin(), c.length_bias.end());
     }
   }
 }
 
 void PrintTable(const Table& t) {
-  std::printf("  %-11s %-8s %8s  %8s  %8s\n", "kind", "flow px", "vectors", "<= 2 px", "median px");
+  std::printf("  %-11s %-8s %8s  %8s  %8s  %9s\n", "kind", "flow px", "vectors", "<= 2 px",
+              "median px", "length");
   for (int k = 0; k < kKinds; ++k) {
     for (int b = 0; b < kFlowBins; ++b) {
       t[k][b].Print(slapse::PlaneKindName(static_cast<slapse::PlaneKind>(k)), b);
@@ -84,8 +98,14 @@ void AddFrame(const slapse::GroundTruth& gt, const slapse::FrameRecord& frame, T
     if (!gt.TransferThroughPlane(label, f, static_cast<int>(ref), x, &x_true)) continue;
     const Eigen::Vector2d x_codec(mv.x_px + mv.dx_px, mv.y_px + mv.dy_px);
     const int kind = static_cast<int>(gt.planes[label].kind);
-    (*table)[kind][FlowBin((x_true - x).norm())].errors_px.push_back(
-        static_cast<float>((x_codec - x_true).norm()));
+    const Eigen::Vector2d d_true = x_true - x;
+    const double flow_px = d_true.norm();
+    Cell& cell = (*table)[kind][FlowBin(flow_px)];
+    cell.errors_px.push_back(static_cast<float>((x_codec - x_true).norm()));
+    if (flow_px >= 1.0) {
+      cell.length_bias.push_back(
+          static_cast<float>((x_codec - x).dot(d_true) / (flow_px * flow_px) - 1.0));
+    }
   }
 }
 
