@@ -300,13 +300,16 @@ TEST(NoMotionTest, StillStreamSaysNoReliableMotion) {
 // vector to another reference than the pair's earlier anchor), and how many.
 struct PairErrors {
   int correspondences = 0, wrong = 0, from_uncertain = 0;
+  int with_indirect = 0, wrong_with_indirect = 0;  // correspondences with B-frame candidates
 };
-PairErrors MergePan(const std::string& path, MergeOptions::UncertainRefs uncertain) {
+PairErrors MergePan(const std::string& path, MergeOptions::UncertainRefs uncertain,
+                    bool pyramid_top_b = true) {
   PairErrors out;
   auto reader = MvReader::Open(path);
   if (!reader.ok()) return out;
   MergeOptions mo;
   mo.uncertain_refs = uncertain;
+  mo.pyramid_top_b = pyramid_top_b;
   mo.chain_min_frames = 1;  // one pair per segment: the references stay visible
   SegmentMerger merger(320, 240, (*reader)->info().mv_sigma_px(), mo);
   FrameRecord f;
@@ -319,7 +322,10 @@ PairErrors MergePan(const std::string& path, MergeOptions::UncertainRefs uncerta
       const Eigen::Vector2d d = c.x_earlier_px - c.x_later_px;
       ++out.correspondences;
       out.from_uncertain += uncertain_p && c.n_direct > 0;
-      out.wrong += (d - steps * Eigen::Vector2d(kVx, kVy)).norm() > 1.0;
+      const bool wrong = (d - steps * Eigen::Vector2d(kVx, kVy)).norm() > 1.0;
+      out.wrong += wrong;
+      out.with_indirect += c.n_indirect > 0;
+      out.wrong_with_indirect += wrong && c.n_indirect > 0;
     }
   }
   return out;
@@ -366,6 +372,20 @@ TEST(ReferenceTest, BPyramidThreeRefsAreMarkedAndNotMixed) {
       << "consistent " << consistent.wrong << "/" << consistent.correspondences << ", keep "
       << keep.wrong << "/" << keep.correspondences;
   EXPECT_LT(consistent.wrong, 0.05 * consistent.correspondences);
+  // The pyramid's top B frame adds indirect candidates (MergeOptions::
+  // pyramid_top_b) without wrong ones: its references are the anchors.
+  const PairErrors direct_only = MergePan(dir + "/bpyr.ts", U::kConsistent, false);
+  EXPECT_EQ(direct_only.with_indirect, 0);
+  EXPECT_GT(consistent.with_indirect, consistent.correspondences / 2)
+      << consistent.with_indirect << " of " << consistent.correspondences;
+  EXPECT_LT(consistent.wrong_with_indirect, 0.02 * consistent.with_indirect);
+  // (A cell whose two candidates disagree gives none: a few fewer cells.)
+  EXPECT_GE(consistent.correspondences, 0.95 * direct_only.correspondences);
+  std::printf(
+      "pyramid pan: %d correspondences (%d wrong, %d with a top-B candidate, %d of them "
+      "wrong); direct only %d (%d wrong)\n",
+      consistent.correspondences, consistent.wrong, consistent.with_indirect,
+      consistent.wrong_with_indirect, direct_only.correspondences, direct_only.wrong);
 }
 
 // The low-rate camera preset keeps to its bitrate (VBV cap), where CRF 20

@@ -540,25 +540,35 @@ TEST(SegmentMergerTest, ChainsARealH264IpppStreamIntoFourFrameSegments) {
 namespace slapse {
 namespace {
 
-TEST(SegmentMergerTest, StopsMergingBFramesOnceABPyramidShows) {
-  SegmentMerger merger(64, 64, kSigma);
-  merger.Push(Frame(0, PictureType::kI, -1, -1, 0.5));
-  // Decoding order 0, 4, 2, 1, 3: B2 is a reference (pyramid).
-  const int64_t coded[] = {0, 3, 2, 4};
-  for (int b = 1; b <= 3; ++b) {
-    FrameRecord f = Frame(b, PictureType::kB, 0, 4, 0.5);
-    f.coded_index = coded[b];
-    merger.Push(f);
-  }
-  FrameRecord p = Frame(4, PictureType::kP, 0, -1, 0.5);
-  p.coded_index = 1;
-  auto pair = merger.Push(p);
-  ASSERT_TRUE(pair);
-  EXPECT_TRUE(merger.b_pyramid_seen());
-  ASSERT_FALSE(pair->correspondences.empty());
-  for (const Correspondence& c : pair->correspondences) {
-    EXPECT_EQ(c.n_indirect, 0);
-    EXPECT_EQ(c.n_direct, 1);
+// Under a B-pyramid only the first-decoded B frame of a segment (the
+// pyramid's top, whose references are the anchors) gives indirect candidates;
+// with pyramid_top_b off, none does.
+TEST(SegmentMergerTest, MergesOnlyThePyramidTopOnceABPyramidShows) {
+  for (const bool top_b : {true, false}) {
+    MergeOptions options;
+    options.pyramid_top_b = top_b;
+    SegmentMerger merger(64, 64, kSigma, options);
+    merger.Push(Frame(0, PictureType::kI, -1, -1, 0.5));
+    // Decoding order 0, 4, 2, 1, 3: B2 is a reference (pyramid).
+    const int64_t coded[] = {0, 3, 2, 4};
+    for (int b = 1; b <= 3; ++b) {
+      FrameRecord f = Frame(b, PictureType::kB, 0, 4, 0.5);
+      f.coded_index = coded[b];
+      f.reference_certain = false;  // as the reader marks a pyramid's B frames
+      merger.Push(f);
+    }
+    FrameRecord p = Frame(4, PictureType::kP, 0, -1, 0.5);
+    p.coded_index = 1;
+    auto pair = merger.Push(p);
+    ASSERT_TRUE(pair);
+    EXPECT_TRUE(merger.b_pyramid_seen());
+    ASSERT_EQ(pair->correspondences.size(), 16u);
+    for (const Correspondence& c : pair->correspondences) {
+      EXPECT_EQ(c.n_indirect, top_b ? 1 : 0) << "top_b " << top_b;
+      EXPECT_EQ(c.n_direct, 1);
+      // B2's past and future vectors compose to the anchors' 4 frames.
+      EXPECT_NEAR(c.x_earlier_px.x() - c.x_later_px.x(), -4 * 0.5, 1e-9);
+    }
   }
 }
 

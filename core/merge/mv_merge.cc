@@ -297,8 +297,36 @@ std::vector<const MotionVector*> SegmentMerger::DirectVectors(const FrameRecord&
     return past;
   }
   if (options_.uncertain_refs == MergeOptions::UncertainRefs::kDrop) return {};
-  // kConsistent: each vector against the component-wise median m of the
-  // vectors whose blocks lie in the 3x3 macroblocks around its own; kept if
+  return ConsistentVectors(past);
+}
+
+int64_t SegmentMerger::FirstDecodedB(int64_t later_index) const {
+  int64_t first = -1;
+  for (const FrameRecord& b : b_frames_) {
+    if (b.next_anchor_index != later_index || b.coded_index < 0) continue;
+    if (first < 0 || b.coded_index < first) first = b.coded_index;
+  }
+  return first;
+}
+
+std::vector<const MotionVector*> SegmentMerger::IndirectVectors(const FrameRecord& b) const {
+  std::vector<const MotionVector*> past, all;
+  for (const MotionVector& mv : b.mvs) {
+    (mv.direction == RefDirection::kPast ? past : all).push_back(&mv);
+  }
+  if (!b.reference_certain && options_.uncertain_refs != MergeOptions::UncertainRefs::kKeep) {
+    past = options_.uncertain_refs == MergeOptions::UncertainRefs::kDrop
+               ? std::vector<const MotionVector*>()
+               : ConsistentVectors(past);
+  }
+  all.insert(all.end(), past.begin(), past.end());
+  return all;
+}
+
+std::vector<const MotionVector*> SegmentMerger::ConsistentVectors(
+    const std::vector<const MotionVector*>& vectors) const {
+  // Each vector against the component-wise median m of the vectors whose
+  // blocks lie in the 3x3 macroblocks around its own; kept if
   //   |v - m| <= max(consistent_min_px, consistent_rel |m|).
   // With locally constant motion a vector to the reference n frames back is
   // about n m: |v - m| = (n - 1) |m| fails for n >= 2 once |m| exceeds
@@ -307,13 +335,13 @@ std::vector<const MotionVector*> SegmentMerger::DirectVectors(const FrameRecord&
   // reference too would pass: a whole region on one older reference is not
   // detected; the pair's robust estimators see it as an outlier region.)
   std::vector<std::vector<const MotionVector*>> by_cell(static_cast<size_t>(mb_cols_) * mb_rows_);
-  for (const MotionVector* mv : past) {
+  for (const MotionVector* mv : vectors) {
     const int cell = CellOf(Eigen::Vector2d(mv->x_px, mv->y_px));
     if (cell >= 0) by_cell[cell].push_back(mv);
   }
   std::vector<const MotionVector*> kept;
   std::vector<double> xs, ys;
-  for (const MotionVector* mv : past) {
+  for (const MotionVector* mv : vectors) {
     const MbCell c = MbCellOfPixel(Eigen::Vector2d(mv->x_px, mv->y_px));
     xs.clear();
     ys.clear();
@@ -361,11 +389,14 @@ AnchorPair SegmentMerger::Build(const FrameRecord& later) const {
       cells[cell].push_back({start, start + Eigen::Vector2d(mv->dx_px, mv->dy_px), true});
     }
   }
-  // Indirect: B blocks with both a past (f) and a future (g) vector.
-  if (options_.use_indirect && !b_pyramid_seen_) {
+  // Indirect: B blocks with both a past (f) and a future (g) vector. Under a
+  // B-pyramid only the segment's first-decoded B frame (pyramid_top_b).
+  if (options_.use_indirect && (!b_pyramid_seen_ || options_.pyramid_top_b)) {
+    const int64_t top_coded = b_pyramid_seen_ ? FirstDecodedB(later.index) : -1;
     std::vector<const MotionVector*> sorted_mvs;
     for (const FrameRecord& b : b_frames_) {
       if (b.next_anchor_index != later.index) continue;
+      if (b_pyramid_seen_ && (top_coded < 0 || b.coded_index != top_coded)) continue;
       // FFmpeg exports a bi-predicted block as two entries with the same block:
       // sorted stably by block (x, y, w, h), each block's last past (f) and
       // last future (g) vector pair up, blocks in ascending order. (A sort,
@@ -373,8 +404,7 @@ AnchorPair SegmentMerger::Build(const FrameRecord& later) const {
       auto block_of = [](const MotionVector* mv) {
         return std::make_tuple(mv->x_px, mv->y_px, mv->w_px, mv->h_px);
       };
-      sorted_mvs.clear();
-      for (const MotionVector& mv : b.mvs) sorted_mvs.push_back(&mv);
+      sorted_mvs = IndirectVectors(b);
       std::stable_sort(
           sorted_mvs.begin(), sorted_mvs.end(),
           [&](const MotionVector* x, const MotionVector* y) { return block_of(x) < block_of(y); });

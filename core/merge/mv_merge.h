@@ -66,6 +66,16 @@ struct MergeOptions {
   UncertainRefs uncertain_refs = UncertainRefs::kConsistent;
   double consistent_min_px = 1.0;
   double consistent_rel = 0.33;
+  // Under a B-pyramid (SegmentMerger::b_pyramid_seen) the B frames between
+  // two anchors may refer to each other, and only the first-decoded one (the
+  // pyramid's top, decoded right after the later anchor) refers to anchors
+  // alone: its future vectors to the later anchor (no other future reference
+  // exists when it is decoded), its past ones to the earlier anchor or, with
+  // extra references, an older frame (handled as uncertain_refs says). True:
+  // its bi-predicted blocks give indirect candidates; false: a B-pyramid's
+  // pairs have the P frame's direct vectors only (docs/METHOD.md "Reference
+  // handling").
+  bool pyramid_top_b = true;
 };
 
 // One candidate correspondence of a cell.
@@ -115,7 +125,8 @@ class SegmentMerger {
   // `frame` is an anchor that closes a segment. Where B frames turn out to be
   // references (a B-pyramid: one decoded before a B shown earlier, see
   // StreamInfo::b_pyramid) their vectors may point to another B frame, so
-  // from then on B frames are not merged: direct vectors only.
+  // from then on only each segment's first-decoded B frame is merged
+  // (MergeOptions::pyramid_top_b; off: direct vectors only).
   std::optional<AnchorPair> Push(const FrameRecord& frame);
   void Reset();
   // `pair`, the pair just emitted, is handed back and becomes the open
@@ -140,6 +151,17 @@ class SegmentMerger {
   // The later P frame's past vectors to use as direct candidates (all of them
   // when its reference is certain; else as MergeOptions::uncertain_refs says).
   std::vector<const MotionVector*> DirectVectors(const FrameRecord& later) const;
+  // The vectors of `vectors` that agree with their local field
+  // (MergeOptions::uncertain_refs kConsistent).
+  std::vector<const MotionVector*> ConsistentVectors(
+      const std::vector<const MotionVector*>& vectors) const;
+  // A B frame's vectors for indirect candidates: its future vectors, and its
+  // past ones as MergeOptions::uncertain_refs says when its reference is not
+  // certain (in any order: Build sorts them by block).
+  std::vector<const MotionVector*> IndirectVectors(const FrameRecord& b) const;
+  // Coded index of the first-decoded B frame before the anchor `later_index`,
+  // -1 if none is known.
+  int64_t FirstDecodedB(int64_t later_index) const;
   // Extends the chain by a one-segment P pair; returns the chained pair when
   // it is long enough.
   std::optional<AnchorPair> Chain(AnchorPair step);
