@@ -424,6 +424,31 @@ TEST(PresetTest, LowRatePresetKeepsTheCamerasBitrate) {
             StatusCode::kInvalidArgument);
 }
 
+// x264 left at its defaults (what the "x264 defaults" streams are):
+// adaptive B frames in a pyramid with 3 references, read and merged without
+// mixing references.
+TEST(PresetTest, X264DefaultsGiveAPyramidThatMergesCleanly) {
+  const std::string dir = MakeTempDir("x264_defaults");
+  auto p = EncoderPreset("h264-x264-defaults", 30.0);
+  ASSERT_TRUE(p.ok());
+  EXPECT_TRUE(p->h264_x264_defaults);
+  ASSERT_TRUE(WritePan(dir + "/pan.ts", *p, 40, kVx, kVy).ok());
+  auto reader = MvReader::Open(dir + "/pan.ts");
+  ASSERT_TRUE(reader.ok());
+  Status end;
+  const std::vector<FrameRecord> frames = ReadAll(reader->get(), &end);
+  ASSERT_EQ(frames.size(), 40u) << end.ToString();
+  int b_frames = 0;
+  for (const FrameRecord& f : frames) b_frames += f.type == PictureType::kB;
+  EXPECT_GT(b_frames, 10);
+  EXPECT_TRUE((*reader)->info().b_pyramid);
+  EXPECT_GE((*reader)->info().max_ref_frames, 3);
+  const PairErrors e = MergePan(dir + "/pan.ts", MergeOptions::UncertainRefs::kConsistent);
+  ASSERT_GT(e.correspondences, 0);
+  EXPECT_GT(e.with_indirect, 0);
+  EXPECT_LT(e.wrong, 0.05 * e.correspondences) << e.wrong << " of " << e.correspondences;
+}
+
 TEST(PresetTest, NamesParseAndUnknownNamesListTheChoices) {
   for (const std::string& name : EncoderPresetNames()) {
     auto p = EncoderPreset(name, 25.0);

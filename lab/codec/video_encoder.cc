@@ -83,7 +83,8 @@ std::vector<std::string> EncoderPresetNames() {
     names.push_back(kBaselinePrefix + std::to_string(s) + "s");
   }
   names.push_back(kLowRatePreset);
-  for (const char* n : {"h264-main-bpyr-3ref", "h264-high-bpyr-3ref", "hevc", "vp9", "mjpeg"}) {
+  for (const char* n : {"h264-main-bpyr-3ref", "h264-high-bpyr-3ref", "h264-x264-defaults", "hevc",
+                        "vp9", "mjpeg"}) {
     names.push_back(n);
   }
   return names;
@@ -135,6 +136,11 @@ StatusOr<EncoderOptions> EncoderPreset(const std::string& name, double fps) {
     o.h264_b_pyramid = true;
     o.h264_refs = 3;
     o.gop_size = frames_in(2);
+    return o;
+  }
+  if (name == "h264-x264-defaults") {
+    o.codec = VideoCodec::kH264;
+    o.h264_x264_defaults = true;
     return o;
   }
   if (name == "hevc" || name == "vp9") {
@@ -209,7 +215,14 @@ StatusOr<std::unique_ptr<VideoEncoder>> VideoEncoder::Open(const std::string& pa
   if (e->mux_->oformat->flags & AVFMT_GLOBALHEADER) c->flags |= AV_CODEC_FLAG_GLOBAL_HEADER;
 
   AVDictionary* opts = nullptr;
-  if (o.codec == VideoCodec::kH264) {
+  if (o.codec == VideoCodec::kH264 && o.h264_x264_defaults) {
+    // x264's own GOP, B frames and references (-1: libx264 keeps its default).
+    c->gop_size = -1;
+    c->max_b_frames = -1;
+    av_dict_set(&opts, "preset", "medium", 0);
+    av_dict_set_int(&opts, "crf", o.quality, 0);
+    if (!o.h264_profile.empty()) av_dict_set(&opts, "profile", o.h264_profile.c_str(), 0);
+  } else if (o.codec == VideoCodec::kH264) {
     av_dict_set(&opts, "preset", "veryfast", 0);
     if (o.h264_bits_per_pixel_s > 0) {
       // A camera's rate control: the average at the cap, a 1 s buffer.

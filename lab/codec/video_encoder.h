@@ -42,6 +42,12 @@ struct EncoderOptions {
   // encoders often use B-pyramids and several references.
   bool h264_b_pyramid = false;
   int h264_refs = 1;
+  // H.264 only: x264's own defaults (preset medium: 3 B frames placed
+  // adaptively, B-pyramid, 3 references, scene cuts, an I frame at most every
+  // 250 frames) instead of the fixed GOP the other fields describe;
+  // b_frames, gop_size, h264_b_pyramid and h264_refs are then not used.
+  // What an encoder left at its defaults sends (issue 13's "x264 defaults").
+  bool h264_x264_defaults = false;
   // H.264 only: profile ("baseline", "main", "high"); empty = x264's choice.
   std::string h264_profile;
   // H.264 only: a camera's bitrate instead of constant quality: average and
@@ -70,6 +76,9 @@ struct EncoderOptions {
 //                            1280x720), VBV-capped (noisier vectors than CRF 20)
 //   h264-main-bpyr-3ref      H.264 Main, 3 B frames, B-pyramid, 3 references, GOP 2 s
 //   h264-high-bpyr-3ref      the same with High profile (x264's defaults for B frames)
+//   h264-x264-defaults       x264 left at its defaults (preset medium, CRF 20): B frames
+//                            placed adaptively (0-3), B-pyramid, 3 references, scene
+//                            cuts, an I frame at most every 250 frames
 //   hevc                     H.265 (libx265), x265's B frames and references, GOP 2 s
 //   vp9, mjpeg               other codecs without exported vectors (re-encode path;
 //                            MJPEG needs a .mkv or .avi container)

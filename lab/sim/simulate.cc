@@ -30,6 +30,7 @@ Status WriteMeta(const SimulateOptions& o, const EncoderOptions& eo, const Drive
   meta["quality"] = eo.quality;
   meta["mpeg4_qpel"] = eo.mpeg4_qpel;
   meta["interlaced"] = eo.interlaced;
+  if (eo.h264_x264_defaults) meta["h264_x264_defaults"] = true;  // b_frames, gop_size unused
   meta["fps"] = o.fps;
   meta["frames"] = gt.frames.size();
   meta["width_px"] = o.width_px;
