@@ -543,6 +543,29 @@ namespace {
 // Under a B-pyramid only the first-decoded B frame of a segment (the
 // pyramid's top, whose references are the anchors) gives indirect candidates;
 // with pyramid_top_b off, none does.
+// A pyramid whose top B frame was damaged (dropped): the first-decoded B
+// left is not decoded right after the later anchor and may refer to the
+// top, so no B frame is merged.
+TEST(SegmentMergerTest, MergesNoBFrameWhenThePyramidTopIsMissing) {
+  SegmentMerger merger(64, 64, kSigma);
+  merger.Push(Frame(0, PictureType::kI, -1, -1, 0.5));
+  const int64_t coded[] = {0, 3, 2, 4};  // decoding order 0, 4, 2, 1, 3
+  for (int b = 1; b <= 3; ++b) {
+    FrameRecord f = Frame(b, PictureType::kB, 0, 4, 0.5);
+    f.coded_index = coded[b];
+    f.reference_certain = false;
+    f.corrupt = b == 2;
+    merger.Push(f);
+  }
+  FrameRecord p = Frame(4, PictureType::kP, 0, -1, 0.5);
+  p.coded_index = 1;
+  auto pair = merger.Push(p);
+  ASSERT_TRUE(pair);
+  EXPECT_TRUE(merger.b_pyramid_seen());
+  ASSERT_EQ(pair->correspondences.size(), 16u);
+  for (const Correspondence& c : pair->correspondences) EXPECT_EQ(c.n_indirect, 0);
+}
+
 TEST(SegmentMergerTest, MergesOnlyThePyramidTopOnceABPyramidShows) {
   for (const bool top_b : {true, false}) {
     MergeOptions options;

@@ -392,7 +392,12 @@ AnchorPair SegmentMerger::Build(const FrameRecord& later) const {
   // Indirect: B blocks with both a past (f) and a future (g) vector. Under a
   // B-pyramid only the segment's first-decoded B frame (pyramid_top_b).
   if (options_.use_indirect && (!b_pyramid_seen_ || options_.pyramid_top_b)) {
-    const int64_t top_coded = b_pyramid_seen_ ? FirstDecodedB(later.index) : -1;
+    // The top is decoded right after the later anchor; a first-decoded B that
+    // is not (the top was corrupt and dropped) may refer to the top.
+    int64_t top_coded = b_pyramid_seen_ ? FirstDecodedB(later.index) : -1;
+    if (top_coded >= 0 && later.coded_index >= 0 && top_coded != later.coded_index + 1) {
+      top_coded = -1;
+    }
     std::vector<const MotionVector*> sorted_mvs;
     for (const FrameRecord& b : b_frames_) {
       if (b.next_anchor_index != later.index) continue;
