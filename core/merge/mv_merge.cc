@@ -339,14 +339,16 @@ std::vector<const MotionVector*> SegmentMerger::ConsistentVectors(
     const int cell = CellOf(Eigen::Vector2d(mv->x_px, mv->y_px));
     if (cell >= 0) by_cell[cell].push_back(mv);
   }
-  std::vector<const MotionVector*> kept;
+  // The median of the 3x3 cells around (row, col); false with fewer than 3
+  // vectors there (too few neighbours to tell). The same for every vector of
+  // a cell: computed once per cell (rows and columns -1 .. size, where
+  // vectors at the frame's edge fall).
   std::vector<double> xs, ys;
-  for (const MotionVector* mv : vectors) {
-    const MbCell c = MbCellOfPixel(Eigen::Vector2d(mv->x_px, mv->y_px));
+  auto neighbourhood_median = [&](int row0, int col0, Eigen::Vector2d* m) {
     xs.clear();
     ys.clear();
-    for (int row = c.row - 1; row <= c.row + 1; ++row) {
-      for (int col = c.col - 1; col <= c.col + 1; ++col) {
+    for (int row = row0 - 1; row <= row0 + 1; ++row) {
+      for (int col = col0 - 1; col <= col0 + 1; ++col) {
         if (row < 0 || col < 0 || row >= mb_rows_ || col >= mb_cols_) continue;
         for (const MotionVector* n : by_cell[row * mb_cols_ + col]) {
           xs.push_back(n->dx_px);
@@ -354,10 +356,29 @@ std::vector<const MotionVector*> SegmentMerger::ConsistentVectors(
         }
       }
     }
-    if (xs.size() < 3) continue;  // too few neighbours to tell
+    if (xs.size() < 3) return false;
     std::nth_element(xs.begin(), xs.begin() + xs.size() / 2, xs.end());
     std::nth_element(ys.begin(), ys.begin() + ys.size() / 2, ys.end());
-    const Eigen::Vector2d m(xs[xs.size() / 2], ys[ys.size() / 2]);
+    *m = Eigen::Vector2d(xs[xs.size() / 2], ys[ys.size() / 2]);
+    return true;
+  };
+  const int padded_cols = mb_cols_ + 2;
+  enum : char { kUnknown, kNone, kKnown };
+  std::vector<char> state(static_cast<size_t>(mb_rows_ + 2) * padded_cols, kUnknown);
+  std::vector<Eigen::Vector2d> medians(state.size());
+  std::vector<const MotionVector*> kept;
+  for (const MotionVector* mv : vectors) {
+    const MbCell c = MbCellOfPixel(Eigen::Vector2d(mv->x_px, mv->y_px));
+    Eigen::Vector2d m;
+    if (c.row >= -1 && c.col >= -1 && c.row <= mb_rows_ && c.col <= mb_cols_) {
+      const size_t k = static_cast<size_t>(c.row + 1) * padded_cols + (c.col + 1);
+      if (state[k] == kUnknown)
+        state[k] = neighbourhood_median(c.row, c.col, &medians[k]) ? kKnown : kNone;
+      if (state[k] == kNone) continue;
+      m = medians[k];
+    } else if (!neighbourhood_median(c.row, c.col, &m)) {
+      continue;
+    }
     const Eigen::Vector2d v(mv->dx_px, mv->dy_px);
     if ((v - m).norm() <=
         std::max(options_.consistent_min_px, options_.consistent_rel * m.norm())) {
