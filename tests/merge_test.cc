@@ -543,23 +543,31 @@ namespace {
 // Under a B-pyramid only the first-decoded B frame of a segment (the
 // pyramid's top, whose references are the anchors) gives indirect candidates;
 // with pyramid_top_b off, none does.
+// One pyramid segment I0 b1 B2 b3 P4 (decoding order 0, 4, 2, 1, 3: B2 is a
+// reference, the pyramid's top), its B frames marked as the reader marks a
+// pyramid's; top_corrupt: B2 damaged (dropped by the merger). Returns the
+// pair 0-4.
+std::optional<AnchorPair> PushPyramidSegment(SegmentMerger* merger, bool top_corrupt) {
+  merger->Push(Frame(0, PictureType::kI, -1, -1, 0.5));
+  const int64_t coded[] = {0, 3, 2, 4};
+  for (int b = 1; b <= 3; ++b) {
+    FrameRecord f = Frame(b, PictureType::kB, 0, 4, 0.5);
+    f.coded_index = coded[b];
+    f.reference_certain = false;
+    f.corrupt = top_corrupt && b == 2;
+    merger->Push(f);
+  }
+  FrameRecord p = Frame(4, PictureType::kP, 0, -1, 0.5);
+  p.coded_index = 1;
+  return merger->Push(p);
+}
+
 // A pyramid whose top B frame was damaged (dropped): the first-decoded B
 // left is not decoded right after the later anchor and may refer to the
 // top, so no B frame is merged.
 TEST(SegmentMergerTest, MergesNoBFrameWhenThePyramidTopIsMissing) {
   SegmentMerger merger(64, 64, kSigma);
-  merger.Push(Frame(0, PictureType::kI, -1, -1, 0.5));
-  const int64_t coded[] = {0, 3, 2, 4};  // decoding order 0, 4, 2, 1, 3
-  for (int b = 1; b <= 3; ++b) {
-    FrameRecord f = Frame(b, PictureType::kB, 0, 4, 0.5);
-    f.coded_index = coded[b];
-    f.reference_certain = false;
-    f.corrupt = b == 2;
-    merger.Push(f);
-  }
-  FrameRecord p = Frame(4, PictureType::kP, 0, -1, 0.5);
-  p.coded_index = 1;
-  auto pair = merger.Push(p);
+  auto pair = PushPyramidSegment(&merger, true);
   ASSERT_TRUE(pair);
   EXPECT_TRUE(merger.b_pyramid_seen());
   ASSERT_EQ(pair->correspondences.size(), 16u);
@@ -571,18 +579,7 @@ TEST(SegmentMergerTest, MergesOnlyThePyramidTopOnceABPyramidShows) {
     MergeOptions options;
     options.pyramid_top_b = top_b;
     SegmentMerger merger(64, 64, kSigma, options);
-    merger.Push(Frame(0, PictureType::kI, -1, -1, 0.5));
-    // Decoding order 0, 4, 2, 1, 3: B2 is a reference (pyramid).
-    const int64_t coded[] = {0, 3, 2, 4};
-    for (int b = 1; b <= 3; ++b) {
-      FrameRecord f = Frame(b, PictureType::kB, 0, 4, 0.5);
-      f.coded_index = coded[b];
-      f.reference_certain = false;  // as the reader marks a pyramid's B frames
-      merger.Push(f);
-    }
-    FrameRecord p = Frame(4, PictureType::kP, 0, -1, 0.5);
-    p.coded_index = 1;
-    auto pair = merger.Push(p);
+    auto pair = PushPyramidSegment(&merger, false);
     ASSERT_TRUE(pair);
     EXPECT_TRUE(merger.b_pyramid_seen());
     ASSERT_EQ(pair->correspondences.size(), 16u);
