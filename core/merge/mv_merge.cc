@@ -311,15 +311,16 @@ int64_t SegmentMerger::FirstDecodedB(int64_t later_index) const {
 
 std::vector<const MotionVector*> SegmentMerger::IndirectVectors(const FrameRecord& b) const {
   std::vector<const MotionVector*> past, all;
+  const bool filter_past =
+      !b.reference_certain && options_.uncertain_refs != MergeOptions::UncertainRefs::kKeep;
   for (const MotionVector& mv : b.mvs) {
-    (mv.direction == RefDirection::kPast ? past : all).push_back(&mv);
+    (filter_past && mv.direction == RefDirection::kPast ? past : all).push_back(&mv);
   }
-  if (!b.reference_certain && options_.uncertain_refs != MergeOptions::UncertainRefs::kKeep) {
-    past = options_.uncertain_refs == MergeOptions::UncertainRefs::kDrop
-               ? std::vector<const MotionVector*>()
-               : ConsistentVectors(past);
+  if (!filter_past) return all;  // every vector as it is (MPEG-2, plain B frames)
+  if (options_.uncertain_refs == MergeOptions::UncertainRefs::kConsistent) {
+    past = ConsistentVectors(past);
+    all.insert(all.end(), past.begin(), past.end());
   }
-  all.insert(all.end(), past.begin(), past.end());
   return all;
 }
 

@@ -215,15 +215,8 @@ StatusOr<std::unique_ptr<VideoEncoder>> VideoEncoder::Open(const std::string& pa
   if (e->mux_->oformat->flags & AVFMT_GLOBALHEADER) c->flags |= AV_CODEC_FLAG_GLOBAL_HEADER;
 
   AVDictionary* opts = nullptr;
-  if (o.codec == VideoCodec::kH264 && o.h264_x264_defaults) {
-    // x264's own GOP, B frames and references (-1: libx264 keeps its default).
-    c->gop_size = -1;
-    c->max_b_frames = -1;
-    av_dict_set(&opts, "preset", "medium", 0);
-    av_dict_set_int(&opts, "crf", o.quality, 0);
-    if (!o.h264_profile.empty()) av_dict_set(&opts, "profile", o.h264_profile.c_str(), 0);
-  } else if (o.codec == VideoCodec::kH264) {
-    av_dict_set(&opts, "preset", "veryfast", 0);
+  if (o.codec == VideoCodec::kH264) {
+    av_dict_set(&opts, "preset", o.h264_x264_defaults ? "medium" : "veryfast", 0);
     if (o.h264_bits_per_pixel_s > 0) {
       // A camera's rate control: the average at the cap, a 1 s buffer.
       c->bit_rate = std::llround(o.h264_bits_per_pixel_s * width_px * height_px);
@@ -232,15 +225,21 @@ StatusOr<std::unique_ptr<VideoEncoder>> VideoEncoder::Open(const std::string& pa
     } else {
       av_dict_set_int(&opts, "crf", o.quality, 0);
     }
-    // Fixed GOP: no adaptive B placement and no scene cuts; by default no
-    // B-pyramid and one reference, so every B frame refers to its two
-    // neighbouring anchors (the reading of MVs in docs/METHOD.md, "MV merging").
-    const std::string params =
-        std::string("scenecut=0:b-adapt=0:b-pyramid=") + (o.h264_b_pyramid ? "normal" : "none") +
-        ":ref=" + std::to_string(std::max(1, o.h264_refs)) +
-        ":bframes=" + std::to_string(o.b_frames) + ":keyint=" + std::to_string(o.gop_size) +
-        ":min-keyint=" + std::to_string(o.gop_size);
-    av_dict_set(&opts, "x264-params", params.c_str(), 0);
+    if (o.h264_x264_defaults) {
+      // x264's own GOP, B frames and references (-1: libx264 keeps its default).
+      c->gop_size = -1;
+      c->max_b_frames = -1;
+    } else {
+      // Fixed GOP: no adaptive B placement and no scene cuts; by default no
+      // B-pyramid and one reference, so every B frame refers to its two
+      // neighbouring anchors (the reading of MVs in docs/METHOD.md, "MV merging").
+      const std::string params =
+          std::string("scenecut=0:b-adapt=0:b-pyramid=") + (o.h264_b_pyramid ? "normal" : "none") +
+          ":ref=" + std::to_string(std::max(1, o.h264_refs)) +
+          ":bframes=" + std::to_string(o.b_frames) + ":keyint=" + std::to_string(o.gop_size) +
+          ":min-keyint=" + std::to_string(o.gop_size);
+      av_dict_set(&opts, "x264-params", params.c_str(), 0);
+    }
     if (!o.h264_profile.empty()) av_dict_set(&opts, "profile", o.h264_profile.c_str(), 0);
   } else if (o.codec == VideoCodec::kHevc) {
     // A camera's HEVC: x265's own B frames and references, a fixed GOP.
