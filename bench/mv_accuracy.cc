@@ -13,13 +13,20 @@
 // a plane's fitted distance and a road's height would inherit). Reading
 // vectors only (no pipeline): what the method is given.
 //   build/bench/mv_accuracy DRIVE_DIR [DRIVE_DIR ...]
+// With --merged [--chain-min-frames N], the anchor pairs' merged
+// correspondences (core/merge, the pipeline's default MergeOptions, chained
+// P fields with N > 1) are compared instead: each correspondence's earlier
+// point against the later MB centre's point transferred through its plane
+// into the earlier anchor; the flow bins are then the pair's true flow.
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <string>
 #include <vector>
 
+#include "core/merge/mv_merge.h"
 #include "core/mv/mv_reader.h"
 #include "lab/gt/ground_truth.h"
 
@@ -74,6 +81,30 @@ void Append(const Table& from, Table* to) {
   }
 }
 
+// One line over the whole table: how many vectors, the share within 2 px,
+// and the same for true displacements of 16 px and more (where a codec's
+// motion search is most often wrong).
+void PrintSummary(const Table& t) {
+  size_t n = 0, good = 0, n_long = 0, good_long = 0;
+  for (int k = 0; k < kKinds; ++k) {
+    for (int b = 0; b < kFlowBins; ++b) {
+      const std::vector<float>& e = t[k][b].errors_px;
+      const size_t g = std::count_if(e.begin(), e.end(), [](float v) { return v <= 2.0f; });
+      n += e.size();
+      good += g;
+      if (kFlowEdgesPx[b] >= 16) {
+        n_long += e.size();
+        good_long += g;
+      }
+    }
+  }
+  std::printf(
+      "  summary: %zu vectors, %.1f %% within 2 px; true flow >= 16 px: %.1f %% of them, "
+      "%.1f %% within 2 px\n",
+      n, n ? 100.0 * good / n : 0.0, n ? 100.0 * n_long / n : 0.0,
+      n_long ? 100.0 * good_long / n_long : 0.0);
+}
+
 void PrintTable(const Table& t) {
   std::printf("  %-11s %-8s %8s  %8s  %8s  %9s\n", "kind", "flow px", "vectors", "<= 2 px",
               "median px", "length");
@@ -81,6 +112,34 @@ void PrintTable(const Table& t) {
     for (int b = 0; b < kFlowBins; ++b) {
       t[k][b].Print(slapse::PlaneKindName(static_cast<slapse::PlaneKind>(k)), b);
     }
+  }
+  PrintSummary(t);
+}
+
+// Adds one cell's comparison of x_codec against the truth x_true (from x).
+void AddVector(int kind, const Eigen::Vector2d& x, const Eigen::Vector2d& x_codec,
+               const Eigen::Vector2d& x_true, Table* table) {
+  const Eigen::Vector2d d_true = x_true - x;
+  const double flow_px = d_true.norm();
+  Cell& cell = (*table)[kind][FlowBin(flow_px)];
+  cell.errors_px.push_back(static_cast<float>((x_codec - x_true).norm()));
+  if (flow_px >= 1.0) {
+    cell.length_bias.push_back(
+        static_cast<float>((x_codec - x).dot(d_true) / (flow_px * flow_px) - 1.0));
+  }
+}
+
+// Adds one anchor pair's plane-labelled merged correspondences to the table.
+void AddPair(const slapse::GroundTruth& gt, const slapse::AnchorPair& pair, Table* table) {
+  const int later = static_cast<int>(pair.later_index),
+            earlier = static_cast<int>(pair.earlier_index);
+  if (later >= static_cast<int>(gt.frames.size()) || earlier < 0) return;
+  for (const slapse::Correspondence& c : pair.correspondences) {
+    const int label = gt.LabelAt(later, c.x_later_px.x(), c.x_later_px.y());
+    if (label < 0) continue;
+    Eigen::Vector2d x_true;
+    if (!gt.TransferThroughPlane(label, later, earlier, c.x_later_px, &x_true)) continue;
+    AddVector(static_cast<int>(gt.planes[label].kind), c.x_later_px, c.x_earlier_px, x_true, table);
   }
 }
 
@@ -97,28 +156,36 @@ void AddFrame(const slapse::GroundTruth& gt, const slapse::FrameRecord& frame, T
     Eigen::Vector2d x_true;
     if (!gt.TransferThroughPlane(label, f, static_cast<int>(ref), x, &x_true)) continue;
     const Eigen::Vector2d x_codec(mv.x_px + mv.dx_px, mv.y_px + mv.dy_px);
-    const int kind = static_cast<int>(gt.planes[label].kind);
-    const Eigen::Vector2d d_true = x_true - x;
-    const double flow_px = d_true.norm();
-    Cell& cell = (*table)[kind][FlowBin(flow_px)];
-    cell.errors_px.push_back(static_cast<float>((x_codec - x_true).norm()));
-    if (flow_px >= 1.0) {
-      cell.length_bias.push_back(
-          static_cast<float>((x_codec - x).dot(d_true) / (flow_px * flow_px) - 1.0));
-    }
+    AddVector(static_cast<int>(gt.planes[label].kind), x, x_codec, x_true, table);
   }
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc < 2) {
-    std::fprintf(stderr, "usage: mv_accuracy DRIVE_DIR [DRIVE_DIR ...]\n");
+  bool merged = false;
+  slapse::MergeOptions merge;
+  std::vector<std::string> dirs;
+  for (int a = 1; a < argc; ++a) {
+    const std::string arg = argv[a];
+    if (arg == "--merged") {
+      merged = true;
+    } else if (arg == "--chain-min-frames" && a + 1 < argc) {
+      merge.chain_min_frames = std::max(1, std::atoi(argv[++a]));
+    } else if (!arg.empty() && arg[0] != '-') {
+      dirs.push_back(arg);
+    } else {
+      dirs.clear();
+      break;
+    }
+  }
+  if (dirs.empty()) {
+    std::fprintf(
+        stderr, "usage: mv_accuracy [--merged [--chain-min-frames N]] DRIVE_DIR [DRIVE_DIR ...]\n");
     return 2;
   }
   Table all{};
-  for (int a = 1; a < argc; ++a) {
-    const std::string dir = argv[a];
+  for (const std::string& dir : dirs) {
     auto gt = slapse::LoadGroundTruth(dir);
     auto reader = slapse::MvReader::Open(dir + "/drive.ts");
     if (!gt.ok() || !reader.ok()) {
@@ -127,8 +194,14 @@ int main(int argc, char** argv) {
       return 1;
     }
     Table table{};
+    slapse::SegmentMerger merger((*reader)->info().width_px, (*reader)->info().height_px,
+                                 (*reader)->info().mv_sigma_px(), merge);
     slapse::FrameRecord frame;
     while ((*reader)->Next(&frame).ok()) {
+      if (merged) {
+        if (auto pair = merger.Push(frame); pair.has_value()) AddPair(*gt, *pair, &table);
+        continue;
+      }
       if (frame.corrupt || frame.index >= static_cast<int64_t>(gt->frames.size())) continue;
       AddFrame(*gt, frame, &table);
     }
@@ -136,7 +209,7 @@ int main(int argc, char** argv) {
     PrintTable(table);
     Append(table, &all);
   }
-  if (argc > 2) {
+  if (dirs.size() > 1) {
     std::printf("all\n");
     PrintTable(all);
   }
