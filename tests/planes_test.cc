@@ -1267,6 +1267,45 @@ TEST(PlaneExtractorTest, DiscoveryRunsAtMostEveryIntervalWhileTracking) {
   EXPECT_EQ(planes_of(&restarted, back).planes.size(), 2u);
 }
 
+TEST(PlaneExtractorTest, BridgesOneEmptyCellButNotAForeignOne) {
+  // A sparsely measured ground: two lattices of every other cell (6 x 8 = 48
+  // each, cells two apart, the cells between them without a vector) on one
+  // homography, separated by column 13, whose cells (rows 9-25) hold the
+  // vectors of another surface (17 of them: too few to be a plane).
+  AnchorPair pair = EmptyGridPair();
+  std::vector<int> left, right, wall;
+  for (int r = 10; r <= 24; r += 2) {
+    for (int c = 2; c <= 12; c += 2) left.push_back(r * kCols + c);
+    for (int c = 14; c <= 24; c += 2) right.push_back(r * kCols + c);
+  }
+  for (int r = 9; r <= 25; ++r) wall.push_back(r * kCols + 13);
+  AddPatch(ExampleHomography(-4.0), left, &pair);
+  AddPatch(ExampleHomography(-4.0), right, &pair);
+  AddPatch(ExampleHomography(-12.0), wall, &pair);
+  const std::vector<int> all = AllIndices(pair);
+
+  // The defaults (max_empty_gap_mbs = 1, no peeling): each lattice is one
+  // component across its empty cells, and the wall's cells keep the two
+  // apart: two planes of 48 blocks, each on one side of column 13.
+  PlaneExtractor bridging(PlaneExtractionOptions{});
+  auto result = bridging.Process(pair, all);
+  ASSERT_TRUE(result.ok());
+  ASSERT_EQ(result->planes.size(), 2u);
+  for (const ExtractedPlane& plane : result->planes) {
+    ASSERT_EQ(plane.mb_indices.size(), 48u);
+    const bool on_left = plane.mb_indices.front() % kCols < 13;
+    for (int mb : plane.mb_indices) EXPECT_EQ(mb % kCols < 13, on_left) << "block " << mb;
+  }
+
+  // Without the bridge every block is its own component: no plane.
+  PlaneExtractionOptions strict;
+  strict.max_empty_gap_mbs = 0;
+  PlaneExtractor unbridged(strict);
+  result = unbridged.Process(pair, all);
+  ASSERT_TRUE(result.ok());
+  EXPECT_TRUE(result->planes.empty());
+}
+
 TEST(PlaneExtractorTest, PeelsIsolatedBlocksAndSpurs) {
   // A 6x5 patch, a one-block spur touching its corner diagonally, and an
   // isolated block two cells away: all on one homography.
@@ -1280,7 +1319,9 @@ TEST(PlaneExtractorTest, PeelsIsolatedBlocksAndSpurs) {
   std::vector<int> patch_sorted = patch;
   std::sort(patch_sorted.begin(), patch_sorted.end());
 
-  PlaneExtractor peeling(PlaneExtractionOptions{});  // min_mb_neighbours = 2
+  PlaneExtractionOptions peel;
+  peel.min_mb_neighbours = 2;
+  PlaneExtractor peeling(peel);
   auto result = peeling.Process(pair, all);
   ASSERT_TRUE(result.ok());
   ASSERT_EQ(result->planes.size(), 1u);
@@ -1300,13 +1341,14 @@ TEST(PlaneExtractorTest, PeelsIsolatedBlocksAndSpurs) {
 }
 
 TEST(PlaneExtractorTest, ScatteredBestModelIsSetAsideForACompactPlane) {
-  // 48 scattered blocks (every other row and column) on homography A beat a
+  // 48 scattered blocks (every third row and column) on homography A beat a
   // compact 6x4 patch (24 MBs) on homography B in support, but no two of them
-  // touch, so A is no plane; B must still be found.
+  // connect (two empty cells between neighbours, more than the one that
+  // max_empty_gap_mbs bridges), so A is no plane; B must still be found.
   AnchorPair pair = EmptyGridPair();
   std::vector<int> scattered;
-  for (int r = 0; r < 12; r += 2) {
-    for (int c = 0; c < 16; c += 2) scattered.push_back(r * kCols + c);
+  for (int r = 0; r < 18; r += 3) {
+    for (int c = 0; c < 24; c += 3) scattered.push_back(r * kCols + c);
   }
   const std::vector<int> compact = Rect(25, 30, 20, 23);
   AddPatch(ExampleHomography(8.0), scattered, &pair);

@@ -92,17 +92,30 @@ struct PlaneExtractionOptions {
   int connectivity_radius_mbs = 1;
   // Connections may also cross up to this many consecutive MB cells without
   // any correspondence (intra-coded / MV-less blocks, common on the fast near
-  // road), so a sparsely measured surface stays one component; cells whose
-  // correspondences belong elsewhere (other planes, plane at infinity) never
-  // connect. Off by default: on the simulated drives it joined more foreign
-  // blocks than road blocks (tau_inf = 5 px: TP 67 -> 59 % at eps_h = 1 px,
-  // recall unchanged).
-  int max_empty_gap_mbs = 0;
+  // road and on low-contrast verges and fields), so a sparsely measured
+  // surface stays one component; cells whose correspondences belong
+  // elsewhere (other planes, plane at infinity) never connect. 1 since
+  // session 21, with min_mb_neighbours = 0 (below): on a rural drive
+  // (rural-15, H.264 IPPP) the ground plane covers ~550 MBs but only ~150 of
+  // them have a correspondence, scattered, so no component reached
+  // min_mbs_per_plane and 97 of 124 anchors were posed without a plane
+  // (ATE 3.06 %; 0.63 % with both). Tuning drives (seeds 1-15 odd, 48 per
+  // profile; `slapse eval-trajectory`, ATE median / worst / mean %):
+  // h264-ippp 0.16 / 3.06 / 0.333 -> 0.12 / 1.14 / 0.249 (gap 1 alone 0.14 /
+  // 1.84 / 0.308, peeling off alone 0.15 / 3.40 / 0.335); mpeg2-ibbbp 0.19 /
+  // 2.45 / 0.463 -> 0.15 / 2.98 / 0.460. Table I (eval-planes, seeds 1-5,
+  // eps_h = 1 px) TP 90.6 -> 81.7 %, recall 48.6 -> 52.2 %: more planes
+  // mix surfaces at extraction, but the filter's map is no worse (plane
+  // eps_d and eps_n over the tuning drives equal or better,
+  // docs/TRAJECTORY.md "Session 21"). 0 turns it off.
+  int max_empty_gap_mbs = 1;
   // Before the split, blocks with fewer than this many of their 8 neighbour
   // cells in the consensus set are dropped (isolated blocks, thin spurs along
-  // edges); 0 keeps them. 2 on the simulated drives: TP +3 points at a recall
-  // cost of ~2 points (eps_h = 1 px).
-  int min_mb_neighbours = 2;
+  // edges); 0 keeps them. 2 gained TP +3 points at a recall cost of ~2
+  // points (eps_h = 1 px) on the simulated urban drives, but on a sparsely
+  // measured ground it peels the scattered road blocks away; 0 since
+  // session 21, with max_empty_gap_mbs = 1 (the figures above).
+  int min_mb_neighbours = 0;
   // Least-squares refits of a kept component (then re-scoring with eps_h and
   // re-splitting) after RANSAC; 0 turns them off. On the simulated drives one
   // refit is best (eps_h = 1 / 2 px, TP / recall %: none 72.9 / 44.2 and
