@@ -1094,11 +1094,12 @@ void AddPatch(const Eigen::Matrix3d& H, const std::vector<int>& cells, AnchorPai
   }
 }
 
-// Cells of the rectangle [c0, c1] x [r0, r1] (inclusive).
-std::vector<int> Rect(int c0, int c1, int r0, int r1) {
+// Cells of the rectangle [c0, c1] x [r0, r1] (inclusive), every step-th
+// column and row from (c0, r0).
+std::vector<int> Rect(int c0, int c1, int r0, int r1, int step = 1) {
   std::vector<int> cells;
-  for (int r = r0; r <= r1; ++r) {
-    for (int c = c0; c <= c1; ++c) cells.push_back(r * kCols + c);
+  for (int r = r0; r <= r1; r += step) {
+    for (int c = c0; c <= c1; c += step) cells.push_back(r * kCols + c);
   }
   return cells;
 }
@@ -1273,15 +1274,9 @@ TEST(PlaneExtractorTest, BridgesOneEmptyCellButNotAForeignOne) {
   // homography, separated by column 13, whose cells (rows 9-25) hold the
   // vectors of another surface (17 of them: too few to be a plane).
   AnchorPair pair = EmptyGridPair();
-  std::vector<int> left, right, wall;
-  for (int r = 10; r <= 24; r += 2) {
-    for (int c = 2; c <= 12; c += 2) left.push_back(r * kCols + c);
-    for (int c = 14; c <= 24; c += 2) right.push_back(r * kCols + c);
-  }
-  for (int r = 9; r <= 25; ++r) wall.push_back(r * kCols + 13);
-  AddPatch(ExampleHomography(-4.0), left, &pair);
-  AddPatch(ExampleHomography(-4.0), right, &pair);
-  AddPatch(ExampleHomography(-12.0), wall, &pair);
+  AddPatch(ExampleHomography(-4.0), Rect(2, 12, 10, 24, 2), &pair);
+  AddPatch(ExampleHomography(-4.0), Rect(14, 24, 10, 24, 2), &pair);
+  AddPatch(ExampleHomography(-12.0), Rect(13, 13, 9, 25), &pair);  // the other surface
   const std::vector<int> all = AllIndices(pair);
 
   // The defaults (max_empty_gap_mbs = 1, no peeling): each lattice is one
@@ -1300,8 +1295,7 @@ TEST(PlaneExtractorTest, BridgesOneEmptyCellButNotAForeignOne) {
   // Without the bridge every block is its own component: no plane.
   PlaneExtractionOptions strict;
   strict.max_empty_gap_mbs = 0;
-  PlaneExtractor unbridged(strict);
-  result = unbridged.Process(pair, all);
+  result = PlaneExtractor(strict).Process(pair, all);
   ASSERT_TRUE(result.ok());
   EXPECT_TRUE(result->planes.empty());
 }
@@ -1346,10 +1340,7 @@ TEST(PlaneExtractorTest, ScatteredBestModelIsSetAsideForACompactPlane) {
   // connect (two empty cells between neighbours, more than the one that
   // max_empty_gap_mbs bridges), so A is no plane; B must still be found.
   AnchorPair pair = EmptyGridPair();
-  std::vector<int> scattered;
-  for (int r = 0; r < 18; r += 3) {
-    for (int c = 0; c < 24; c += 3) scattered.push_back(r * kCols + c);
-  }
+  const std::vector<int> scattered = Rect(0, 21, 0, 15, 3);
   const std::vector<int> compact = Rect(25, 30, 20, 23);
   AddPatch(ExampleHomography(8.0), scattered, &pair);
   AddPatch(ExampleHomography(-8.0), compact, &pair);
