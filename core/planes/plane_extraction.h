@@ -105,9 +105,9 @@ struct PlaneExtractionOptions {
   // 1.84 / 0.308, peeling off alone 0.15 / 3.40 / 0.335); mpeg2-ibbbp 0.19 /
   // 2.45 / 0.463 -> 0.15 / 2.98 / 0.460. Table I (eval-planes, seeds 1-5,
   // eps_h = 1 px) TP 90.6 -> 81.7 %, recall 48.6 -> 52.2 %: more planes
-  // mix surfaces at extraction, but the filter's map is no worse (plane
-  // eps_d and eps_n over the tuning drives equal or better,
-  // docs/TRAJECTORY.md "Session 21"). 0 turns it off.
+  // mix surfaces at extraction, while the filter's map holds (mean plane
+  // eps_d and eps_n over the tuning drives equal or lower; the H.264
+  // medians a little higher, docs/TRAJECTORY.md "Session 21"). 0: off.
   int max_empty_gap_mbs = 1;
   // Before the split, blocks with fewer than this many of their 8 neighbour
   // cells in the consensus set are dropped (isolated blocks, thin spurs along
