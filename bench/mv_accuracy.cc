@@ -42,6 +42,11 @@ int FlowBin(double flow_px) {
   return b;
 }
 
+// How many of the errors are within 2 px of the truth (the tables' "good").
+size_t WithinTwoPx(const std::vector<float>& errors_px) {
+  return std::count_if(errors_px.begin(), errors_px.end(), [](float v) { return v <= 2.0f; });
+}
+
 double Median(std::vector<float> v) {
   if (v.empty()) return std::nan("");
   std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
@@ -56,7 +61,7 @@ struct Cell {
     const std::vector<float>& e = errors_px;
     const size_t n = e.size();
     const double median = Median(e);
-    const size_t good = std::count_if(e.begin(), e.end(), [](float v) { return v <= 2.0f; });
+    const size_t good = WithinTwoPx(e);
     char range[32];
     if (bin + 1 < kFlowBins) {
       std::snprintf(range, sizeof range, "%g-%g", kFlowEdgesPx[bin], kFlowEdgesPx[bin + 1]);
@@ -89,7 +94,7 @@ void PrintSummary(const Table& t) {
   for (int k = 0; k < kKinds; ++k) {
     for (int b = 0; b < kFlowBins; ++b) {
       const std::vector<float>& e = t[k][b].errors_px;
-      const size_t g = std::count_if(e.begin(), e.end(), [](float v) { return v <= 2.0f; });
+      const size_t g = WithinTwoPx(e);
       n += e.size();
       good += g;
       if (kFlowEdgesPx[b] >= 16) {

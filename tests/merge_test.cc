@@ -540,9 +540,6 @@ TEST(SegmentMergerTest, ChainsARealH264IpppStreamIntoFourFrameSegments) {
 namespace slapse {
 namespace {
 
-// Under a B-pyramid only the first-decoded B frame of a segment (the
-// pyramid's top, whose references are the anchors) gives indirect candidates;
-// with pyramid_top_b off, none does.
 // One pyramid segment I0 b1 B2 b3 P4 (decoding order 0, 4, 2, 1, 3: B2 is a
 // reference, the pyramid's top), its B frames marked as the reader marks a
 // pyramid's; top_corrupt: B2 damaged (dropped by the merger). Returns the
@@ -574,6 +571,9 @@ TEST(SegmentMergerTest, MergesNoBFrameWhenThePyramidTopIsMissing) {
   for (const Correspondence& c : pair->correspondences) EXPECT_EQ(c.n_indirect, 0);
 }
 
+// Under a B-pyramid only the first-decoded B frame of a segment (the
+// pyramid's top, whose references are the anchors) gives indirect candidates;
+// with pyramid_top_b off, none does.
 TEST(SegmentMergerTest, MergesOnlyThePyramidTopOnceABPyramidShows) {
   for (const bool top_b : {true, false}) {
     MergeOptions options;
