@@ -337,6 +337,9 @@ int RunRun(int argc, char** argv) {
       pipeline.poses().size(), kinds[PoseKind::kAnchor], kinds[PoseKind::kCoasting],
       kinds[PoseKind::kMotionOnly], kinds[PoseKind::kFrame], kinds[PoseKind::kInterpolated]);
   if (!scale_note.empty()) std::printf("scale      %s\n", scale_note.c_str());
+  if (!pipeline.trajectory().empty()) {
+    std::printf("support    %s\n", pipeline.scale_support().Summary().c_str());
+  }
 
   if (pipeline.trajectory().empty()) {
     // Never a silent empty result: say why (a still camera, a stream too short or too small).

@@ -38,6 +38,20 @@ const char* PoseKindName(PoseKind kind) {
   return "?";
 }
 
+std::string ScaleSupport::Summary() const {
+  if (anchor_steps == 0) return "no anchor step tracked";
+  std::string out = "planes measured " +
+                    std::to_string(static_cast<int>(std::lround(100 * PlaneStepShare()))) +
+                    " % of the " + std::to_string(anchor_steps) + " anchor steps";
+  if (Weak()) {
+    out +=
+        ": the remaining steps take their length from the motion model (constant speed), so "
+        "expect the scale to drift with the speed by several % (docs/TRAJECTORY.md \"Scale "
+        "support\")";
+  }
+  return out;
+}
+
 FramePoser::FramePoser(const Intrinsics& intrinsics, double sigma_px, FramePoserOptions options)
     : intrinsics_(intrinsics),
       sigma_px_(sigma_px),

@@ -66,6 +66,36 @@ struct PoseQuality {
   std::string note;  // why INTERPOLATED / COASTING, or the restart
 };
 
+// How much of a trajectory's length the planes measured: a run can be told
+// good from bad by it (docs/TRAJECTORY.md "Scale support"). An anchor step
+// whose filter update observed a tracked plane (PoseKind::kAnchor) has its
+// length measured; a COASTING or MOTION_ONLY one takes it from the motion
+// model (constant speed), so where those dominate the scale drifts with the
+// speed. On the 48 tuning drives the runs with planes under
+// kMinPlaneStepShare of their steps had a median ATE of 0.68 % of the
+// distance and eps_D 6.5 % (H.264 IPPP; MPEG-2 IBBBP 0.87 and 4.9 %), the
+// others 0.11 % and 0.9 % (0.12, 0.9 %); the reporting drives split the same
+// way. A held share is no guarantee: the worst held runs reach 1.3-1.5 %.
+struct ScaleSupport {
+  static constexpr double kMinPlaneStepShare = 0.7;
+  int64_t anchor_steps = 0;  // tracked anchor steps (anchor poses but the first)
+  int64_t plane_steps = 0;   // of which a plane observation measured (kAnchor)
+
+  // Counts one anchor step posed as `kind`.
+  void Count(PoseKind kind) {
+    ++anchor_steps;
+    plane_steps += kind == PoseKind::kAnchor;
+  }
+  // plane_steps / anchor_steps (0 without steps).
+  double PlaneStepShare() const {
+    return anchor_steps > 0 ? static_cast<double>(plane_steps) / anchor_steps : 0.0;
+  }
+  // Planes measured fewer than kMinPlaneStepShare of the steps (false without steps).
+  bool Weak() const { return anchor_steps > 0 && PlaneStepShare() < kMinPlaneStepShare; }
+  // One line for a person: the share, and what a weak share means.
+  std::string Summary() const;
+};
+
 // The pose between two timed poses at `timestamp_s`: slerp of the rotation,
 // linear in position (the prior of the frames between anchors).
 Rigid3d InterpolatePose(const TimedPose& a, const TimedPose& b, double timestamp_s);

@@ -238,6 +238,9 @@ class Pipeline {
   // Every plane the filter ever held, by track id (those not forgotten).
   const std::map<int, MapPlane>& plane_map() const { return plane_map_; }
   bool metric() const { return metric_; }
+  // How many of the tracked anchor steps a plane observation measured
+  // (ScaleSupport), over the whole run.
+  const ScaleSupport& scale_support() const { return scale_support_; }
 
   // Bounded memory for runs of any length (the service, whose store keeps
   // the results): drops the final poses but the last `keep_final_poses`,
@@ -302,6 +305,7 @@ class Pipeline {
   Rigid3d world_from_cam_;
   bool metric_ = false;
   std::vector<TimedPose> trajectory_;
+  ScaleSupport scale_support_;
   std::map<int, MapPlane> plane_map_;
   FramePoser frame_poser_;
   std::vector<FramePose> poses_;

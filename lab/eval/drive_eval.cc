@@ -35,6 +35,7 @@ struct Run {
   PipelineStepCounts counts;    // extended: pairs handed back for a longer baseline
   int motion_only_anchors = 0;  // anchors posed without a plane (PoseKind::kMotionOnly)
   int coasting_anchors = 0;     // anchors posed by the motion model (PoseKind::kCoasting)
+  ScaleSupport scale_support;
   std::map<std::string, int> notes;
 };
 
@@ -66,6 +67,7 @@ StatusOr<Run> RunPipeline(const std::vector<FrameRecord>& frames, const Intrinsi
     run.coasting_anchors += p.quality.kind == PoseKind::kCoasting;
   }
   run.metric = pipeline.metric();
+  run.scale_support = pipeline.scale_support();
   return run;
 }
 
@@ -145,6 +147,7 @@ StatusOr<DriveResult> EvaluateDrive(const DriveSpec& spec, const DriveEvalOption
   r.motion_only_anchors = base->motion_only_anchors;
   r.coasting_anchors = base->coasting_anchors;
   r.extended_pairs = base->counts.extended;
+  r.scale_support = base->scale_support;
   int most = 0;
   for (const auto& [note, n] : base->notes) {
     if (n > most) most = n, r.note = note;
@@ -227,6 +230,7 @@ std::string SplitTable(const std::vector<DriveResult>& results, DriveSplit split
         "deg) |\n";
   md << "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
   std::vector<double> ate_pct, eps_D, posed, epsd, epsn, scale[kNumScaleSources];
+  std::vector<double> weak_ate, weak_eps_D, held_ate, held_eps_D;  // by ScaleSupport::Weak
   int missing = 0, n = 0;
   for (const DriveResult& r : results) {
     if (r.spec.split != split) continue;
@@ -245,6 +249,8 @@ std::string SplitTable(const std::vector<DriveResult>& results, DriveSplit split
     const double pct = r.distance_m > 0 ? 100 * r.ate_m / r.distance_m : NAN;
     ate_pct.push_back(pct);
     eps_D.push_back(100 * r.eps_D);
+    (r.scale_support.Weak() ? weak_ate : held_ate).push_back(pct);
+    (r.scale_support.Weak() ? weak_eps_D : held_eps_D).push_back(100 * r.eps_D);
     for (int k = 0; k < kNumScaleSources; ++k) {
       if (r.metric[k]) scale[k].push_back(100 * std::abs(r.scale_error[k]));
     }
@@ -272,6 +278,14 @@ std::string SplitTable(const std::vector<DriveResult>& results, DriveSplit split
      << " metric), eps_d " << mw(epsd, "%.2f m") << ", eps_n " << mw(epsn, "%.2f deg")
      << "; frames posed: median "
      << (posed.empty() ? std::string("-") : Fmt("%.0f %%", 100 * Median(posed))) << ".\n";
+  if (!ate_pct.empty()) {
+    md << "\nScale support (ScaleSupport, docs/TRAJECTORY.md \"Scale support\"): "
+       << weak_ate.size() << " scored drives with planes measuring fewer than "
+       << Fmt("%.0f %%", 100 * ScaleSupport::kMinPlaneStepShare) << " of their anchor steps, ATE "
+       << mw(weak_ate, "%.2f %%") << ", eps_D " << mw(weak_eps_D, "%.2f %%") << "; the other "
+       << held_ate.size() << ", ATE " << mw(held_ate, "%.2f %%") << ", eps_D "
+       << mw(held_eps_D, "%.2f %%") << ".\n";
+  }
   return md.str();
 }
 
@@ -315,7 +329,7 @@ std::string DriveResultsCsv(const std::vector<DriveResult>& results) {
          "height,"
          "scale_err_height,metric_speed,scale_err_speed,metric_first_step,scale_err_first_step,"
          "camera_height_m,pitch_down_deg,simulate_s,evaluate_s,note,motion_only_anchors,coasting_"
-         "anchors,extended_pairs\n";
+         "anchors,extended_pairs,plane_step_share\n";
   for (const DriveResult& r : results) {
     const SimulateOptions& o = r.spec.sim;
     std::string note = r.note;
@@ -333,7 +347,8 @@ std::string DriveResultsCsv(const std::vector<DriveResult>& results) {
     }
     csv << "," << o.camera_height_min_m << "," << o.pitch_down_min_deg << "," << r.simulate_s << ","
         << r.evaluate_s << ",\"" << note << "\"," << r.motion_only_anchors << ","
-        << r.coasting_anchors << "," << r.extended_pairs << "\n";
+        << r.coasting_anchors << "," << r.extended_pairs << "," << r.scale_support.PlaneStepShare()
+        << "\n";
   }
   return csv.str();
 }
