@@ -89,7 +89,8 @@ std::vector<MetricFamily> SessionFamilies(const std::vector<v1::Session>& sessio
       Family("slapse_sessions_failed", "FAILED sessions held, by their error's gRPC status code",
              MetricType::Gauge);
   std::map<std::string, int> failed_by_code;
-  std::vector<MetricFamily> per(7);
+  constexpr int kPerSession = 8;  // the families below, one sample per session each
+  std::vector<MetricFamily> per(kPerSession);
   per[0] = Family("slapse_session_frames_total", "Frames decoded", MetricType::Counter);
   per[1] = Family("slapse_session_anchor_pairs_total",
                   "Anchor pairs processed (one pose update each)", MetricType::Counter);
@@ -104,6 +105,9 @@ std::vector<MetricFamily> SessionFamilies(const std::vector<v1::Session>& sessio
   per[6] = Family("slapse_session_lag_seconds",
                   "Wall time since the first frame minus the stream time of the last frame",
                   MetricType::Gauge);
+  per[7] = Family("slapse_session_plane_steps_total",
+                  "Tracked anchor pairs whose step length a plane observation measured",
+                  MetricType::Counter);
   for (const v1::Session& s : sessions) {
     ++state_count[s.state()];
     if (s.state() == v1::Session::FAILED) {
@@ -111,14 +115,15 @@ std::vector<MetricFamily> SessionFamilies(const std::vector<v1::Session>& sessio
     }
     const std::vector<ClientMetric::Label> l = {{"session", s.name()}};
     const v1::SessionStats& st = s.stats();
-    const double values[7] = {static_cast<double>(st.frames()),
-                              static_cast<double>(st.anchor_pairs()),
-                              static_cast<double>(st.tracked_pairs()),
-                              static_cast<double>(st.reconnects()),
-                              static_cast<double>(st.planes()),
-                              st.fps(),
-                              st.lag_ms() / 1e3};
-    for (int i = 0; i < 7; ++i) AddSample(&per[i], l, values[i]);
+    const double values[kPerSession] = {static_cast<double>(st.frames()),
+                                        static_cast<double>(st.anchor_pairs()),
+                                        static_cast<double>(st.tracked_pairs()),
+                                        static_cast<double>(st.reconnects()),
+                                        static_cast<double>(st.planes()),
+                                        st.fps(),
+                                        st.lag_ms() / 1e3,
+                                        static_cast<double>(st.plane_steps())};
+    for (int i = 0; i < kPerSession; ++i) AddSample(&per[i], l, values[i]);
   }
   for (const auto& [state, n] : state_count) {
     AddSample(&by_state, {{"state", v1::Session::State_Name(state)}}, n);

@@ -61,6 +61,7 @@ SessionRunner::SessionRunner(std::shared_ptr<Session> session, size_t final_pose
   frames_ = frames_before_ = st.frames();
   pairs_ = st.anchor_pairs();
   tracked_ = st.tracked_pairs();
+  plane_steps_before_ = st.plane_steps();
   last_index_ = session_->resumed_last_index;
   last_timestamp_s_ = st.stream_time_s();
   const auto down = std::chrono::duration<double>(std::max(0.0, session_->resumed_down_s));
@@ -305,6 +306,10 @@ void SessionRunner::Publish(const FrameRecord& frame, const PipelineStep* step) 
       tracked_ += step->tracking;
       st->set_anchor_pairs(pairs_);
       st->set_tracked_pairs(tracked_);
+      const ScaleSupport support{tracked_,
+                                 plane_steps_before_ + pipeline_->scale_support().plane_steps};
+      st->set_plane_steps(support.plane_steps);
+      st->set_scale_support_weak(support.Weak());
       st->set_planes(
           static_cast<int>(pipeline_->planes_forgotten() + pipeline_->plane_map().size()));
       *session_->proto.mutable_update_time() = TimeUtil::GetCurrentTime();

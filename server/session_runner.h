@@ -86,6 +86,9 @@ class SessionRunner {
   int64_t frames_before_ = 0;  // of frames_, decoded before a restart (not by this runner)
   size_t notes_reported_ = 0;  // the connection's reader notes already in stream_report
   int64_t pairs_ = 0, tracked_ = 0;
+  // A resumed session's plane_steps before this runner's pipeline (whose
+  // ScaleSupport counts its own steps only).
+  int64_t plane_steps_before_ = 0;
   int64_t index_offset_ = 0;       // added to a connection's frame indices
   double time_offset_s_ = 0.0;     // and to its timestamps
   int64_t last_index_ = -1;        // of the last frame processed (offset)

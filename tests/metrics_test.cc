@@ -15,6 +15,7 @@
 
 #include "api/convert.h"
 #include "client/lib/client.h"
+#include "core/pipeline/frame_poses.h"
 #include "server/server.h"
 #include "tests/test_streams.h"
 
@@ -130,6 +131,14 @@ TEST(MetricsTest, SessionRpcsWatchersAndStagesOnMetrics) {
   EXPECT_EQ(Sample(text, "slapse_session_tracked_pairs_total" + s),
             session->stats().tracked_pairs());
   EXPECT_EQ(Sample(text, "slapse_session_planes" + s), session->stats().planes());
+  EXPECT_EQ(Sample(text, "slapse_session_plane_steps_total" + s), session->stats().plane_steps());
+  // Planes measured some of the tracked steps, never more than were tracked,
+  // and the verdict is ScaleSupport's on those counts.
+  EXPECT_GT(session->stats().plane_steps(), 0);
+  EXPECT_LE(session->stats().plane_steps(), session->stats().tracked_pairs());
+  EXPECT_EQ(
+      session->stats().scale_support_weak(),
+      (ScaleSupport{session->stats().tracked_pairs(), session->stats().plane_steps()}.Weak()));
   // Doubles are printed with 16 significant digits.
   EXPECT_NEAR(Sample(text, "slapse_session_fps" + s).value_or(-1), session->stats().fps(),
               1e-9 * session->stats().fps());

@@ -45,6 +45,16 @@ export function num(x) {
   return x === undefined || x === null ? 0 : Number(x);
 }
 
+// The share of tracked steps whose length a plane measured
+// (SessionStats.plane_steps), as text; "weak" as the server judged it
+// (scale_support_weak: the scale drifts with the speed).
+export function planeShare(stats) {
+  const tracked = num(stats.tracked_pairs);
+  if (tracked === 0) return '';
+  const pct = Math.round((100 * num(stats.plane_steps)) / tracked);
+  return stats.scale_support_weak ? `${pct} % (weak)` : `${pct} %`;
+}
+
 // Milliseconds since the epoch of an RFC 3339 timestamp (nanoseconds cut to ms).
 export function timeMs(rfc3339) {
   if (!rfc3339) return NaN;

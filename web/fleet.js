@@ -1,6 +1,6 @@
 // The fleet page: the caller's sessions from /api/sessions (ListSessions'
 // filter and order_by), sortable by column, refreshed while "live" is on.
-import { call, el, idOf, labelsText, num, sourceOf, STATES } from './api.js';
+import { call, el, idOf, labelsText, num, planeShare, sourceOf, STATES } from './api.js';
 
 const REFRESH_MS = 2000;
 // Columns: header, order_by field (null: not sortable), cell text.
@@ -13,6 +13,7 @@ const COLUMNS = [
   ['Lag (ms)', 'stats.lag_ms', (s) => num(s.stats.lag_ms).toFixed(0)],
   ['Frames', 'stats.frames', (s) => num(s.stats.frames)],
   ['Tracked steps', 'stats.tracked_pairs', (s) => `${num(s.stats.tracked_pairs)} / ${num(s.stats.anchor_pairs)}`],
+  ['Scale held', 'stats.plane_steps', (s) => planeShare(s.stats)],
   ['Planes', 'stats.planes', (s) => num(s.stats.planes)],
   ['Reconnects', 'stats.reconnects', (s) => num(s.stats.reconnects)],
   ['Labels', null, (s) => labelsText(s.labels)],

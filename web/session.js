@@ -2,7 +2,7 @@
 // then live over server-sent events from the session's event log (the one
 // WatchSession reads): PoseUpdate.frame_poses append or replace poses by frame
 // index, plane events refresh the plane map, state changes the header.
-import { call, el, idOf, labelsText, num, sourceOf, TERMINAL, timeMs } from './api.js';
+import { call, el, idOf, labelsText, num, planeShare, sourceOf, TERMINAL, timeMs } from './api.js';
 import { drawSeries, drawSide, drawTopDown } from './draw.js';
 
 const STATS_MS = 2000;
@@ -90,6 +90,7 @@ function showSession(s) {
     ['fps', num(s.stats.fps).toFixed(1)],
     ['Lag', `${num(s.stats.lag_ms).toFixed(0)} ms`],
     ['Tracked steps', `${num(s.stats.tracked_pairs)} / ${num(s.stats.anchor_pairs)}`],
+    ['Scale held by planes', planeShare(s.stats)],
     ['Planes', num(s.stats.planes)],
     ['Reconnects', num(s.stats.reconnects)],
     ['Labels', labelsText(s.labels) || '—'],

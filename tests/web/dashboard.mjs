@@ -170,6 +170,9 @@ async function main() {
     const liveRow = page.locator(`#fleet tbody tr[data-name="${args.live}"]`);
     check((await liveRow.locator('td').nth(0).textContent()) === 'rtsp_push', 'live row source rtsp_push');
     check((await liveRow.textContent()).includes('site=north'), 'live row shows its labels');
+    // The finished upload shows the share of its steps that planes measured.
+    const uploadRow = page.locator(`#fleet tbody tr[data-name="${args.upload}"]`);
+    check(/\d+ %/.test(await uploadRow.textContent()), 'upload row shows its scale support');
 
     // The filter box passes an AIP-160 filter: only the upload is left.
     await page.fill('#filter', 'source = upload');
