@@ -13,7 +13,8 @@ const COLUMNS = [
   ['Lag (ms)', 'stats.lag_ms', (s) => num(s.stats.lag_ms).toFixed(0)],
   ['Frames', 'stats.frames', (s) => num(s.stats.frames)],
   ['Tracked steps', 'stats.tracked_pairs', (s) => `${num(s.stats.tracked_pairs)} / ${num(s.stats.anchor_pairs)}`],
-  ['Scale held', 'stats.plane_steps', (s) => planeShare(s.stats)],
+  // A share of tracked_pairs: no counter to sort it by (plane_steps alone would mislead).
+  ['Scale held', null, (s) => planeShare(s.stats)],
   ['Planes', 'stats.planes', (s) => num(s.stats.planes)],
   ['Reconnects', 'stats.reconnects', (s) => num(s.stats.reconnects)],
   ['Labels', null, (s) => labelsText(s.labels)],

@@ -78,7 +78,7 @@ struct PoseQuality {
 // way. A held share is no guarantee: the worst held runs reach 1.3-1.5 %.
 struct ScaleSupport {
   static constexpr double kMinPlaneStepShare = 0.7;
-  int64_t anchor_steps = 0;  // tracked anchor steps (anchor poses but the first)
+  int64_t anchor_steps = 0;  // tracked anchor steps (one a tracked pair)
   int64_t plane_steps = 0;   // of which a plane observation measured (kAnchor)
 
   // Counts one anchor step posed as `kind`.
