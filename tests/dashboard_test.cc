@@ -39,12 +39,12 @@ int RunCapture(const std::string& command, std::string* out) {
   return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
 }
 
-// Ensures tests/web/node_modules holds playwright-core (npm ci from the lockfile).
-void NpmCi(const std::string& web_dir) {
-  if (std::filesystem::exists(web_dir + "/node_modules/playwright-core")) return;
+// Ensures tests/web/node_modules holds playwright-core: tests/web/ensure-node-modules.sh
+// (`npm ci` from the lockfile, once, under a lock; ctest runs it first as the
+// dashboard_test.web_node_modules fixture, this covers running the binary alone).
+void EnsureNodeModules(const std::string& web_dir) {
   std::string log;
-  ASSERT_EQ(RunCapture("npm ci --no-audit --no-fund --prefix '" + web_dir + "' 2>&1", &log), 0)
-      << log;
+  ASSERT_EQ(RunCapture("'" + web_dir + "/ensure-node-modules.sh' 2>&1", &log), 0) << log;
 }
 
 // Polls `name` until its state is terminal (bounded).
@@ -62,7 +62,7 @@ v1::Session WaitEnded(client::SlapseClient* client, const std::string& name) {
 
 TEST(DashboardTest, BrowserShowsTheFleetALiveSessionAndStopsIt) {
   const std::string web_dir = SLAPSE_WEB_TEST_DIR;
-  NpmCi(web_dir);
+  EnsureNodeModules(web_dir);
   auto drive =
       testing::SimulateTestDrive("dashboard_test_drive", testing::SmallMpeg2DriveOptions(3, 6.0));
   ASSERT_TRUE(drive.ok()) << drive.status().ToString();
@@ -134,7 +134,7 @@ TEST(DashboardTest, BrowserShowsTheFleetALiveSessionAndStopsIt) {
 
 TEST(DashboardTest, LoginFormRefusesAWrongTokenAndShowsOnlyTheTenantsSessions) {
   const std::string web_dir = SLAPSE_WEB_TEST_DIR;
-  NpmCi(web_dir);
+  EnsureNodeModules(web_dir);
   auto drive =
       testing::SimulateTestDrive("dashboard_login_drive", testing::SmallMpeg2DriveOptions(4, 2.0));
   ASSERT_TRUE(drive.ok()) << drive.status().ToString();
