@@ -12,6 +12,7 @@
 
 #include "core/common/angles.h"
 #include "core/common/so3.h"
+#include "core/refine/block_lm.h"
 #include "core/refine/plane_transfer_cost.h"
 
 namespace slapse {
@@ -120,7 +121,7 @@ struct RoadAttitudeResidual {
   double inv_sigma;
 };
 
-// Poses as Ceres parameter blocks: Eigen quaternion (x, y, z, w) and centre.
+// Poses as parameter blocks: Eigen quaternion (x, y, z, w) and centre.
 struct PoseBlock {
   Eigen::Quaterniond q;
   Eigen::Vector3d c;
@@ -236,23 +237,23 @@ void WindowRefiner::DropOldest() {
 struct WindowRefiner::Problem {
   std::vector<PoseBlock> poses;        // [before (if any),] anchors oldest .. newest
   std::map<int, Eigen::Vector3d> pis;  // plane id -> pi in the oldest camera
-  ceres::Problem problem;
-  std::unique_ptr<ceres::Manifold> quaternion;
+  BlockLmProblem problem;
   int residuals = 0;
+  Status status;  // the first error in building the problem
 
-  static ceres::Problem::Options Options() {
-    ceres::Problem::Options o;
-    o.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
-    return o;
+  void Note(const Status& s) {
+    if (status.ok() && !s.ok()) status = s;
   }
-  Problem() : problem(Options()) {}
   void AddPose(PoseBlock* p, bool constant) {
-    problem.AddParameterBlock(p->q.coeffs().data(), 4, quaternion.get());
-    problem.AddParameterBlock(p->c.data(), 3);
+    Note(problem.AddQuaternionBlock(p->q.coeffs().data()));
+    Note(problem.AddVectorBlock(p->c.data(), 3));
     if (constant) {
-      problem.SetParameterBlockConstant(p->q.coeffs().data());
-      problem.SetParameterBlockConstant(p->c.data());
+      Note(problem.SetConstant(p->q.coeffs().data()));
+      Note(problem.SetConstant(p->c.data()));
     }
+  }
+  void Add(ceres::CostFunction* cost, const std::vector<double*>& blocks) {
+    Note(problem.AddResidualBlock(std::unique_ptr<ceres::CostFunction>(cost), blocks));
   }
 };
 
@@ -264,7 +265,6 @@ Status WindowRefiner::Refine(WindowRefineReport* report) {
   rep.anchors = static_cast<int>(n);
   if (n < 2) return Status::Ok();
   Problem wp;
-  wp.quaternion = std::make_unique<ceres::EigenQuaternionManifold>();
   const size_t first = before_ ? 1 : 0;  // index of anchor 0 in wp.poses
   wp.poses.reserve(n + 1);
   if (before_)
@@ -277,6 +277,7 @@ Status WindowRefiner::Refine(WindowRefineReport* report) {
     const Plane3d p = PlaneInCamera(world_from_r, plane, true);
     if (p.distance > 0) wp.pis[id] = p.InverseDepth();
   }
+  for (auto& [id, pi] : wp.pis) wp.Note(wp.problem.AddVectorBlock(pi.data(), 3));
   const double before_step =
       (anchors_[n - 1].world_from_cam.translation - anchors_[n - 2].world_from_cam.translation)
           .norm();
@@ -284,20 +285,13 @@ Status WindowRefiner::Refine(WindowRefineReport* report) {
   if (wp.residuals == 0) return Status::Ok();
   AddGaugeAndPriors(&wp, first, &rep);
 
-  ceres::Solver::Options so;
-  // Each transfer residual touches two poses and one plane (17 of the
-  // window's 50-60 parameters). DENSE_NORMAL_CHOLESKY formed J^T J from the
-  // whole dense Jacobian; the sparse normal equations give the same solution
-  // with 0-20 % less refinement time per anchor pair (docs/BENCHMARKS.md
-  // "Window refinement").
-  so.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
-  so.max_num_iterations = options_.max_iterations;
-  so.num_threads = 1;
-  so.logging_type = ceres::SILENT;
-  ceres::Solver::Summary summary;
-  ceres::Solve(so, &wp.problem, &summary);
-  if (!summary.IsSolutionUsable() || !std::isfinite(summary.final_cost)) {
-    return InternalError("window refinement failed: " + summary.message);
+  if (!wp.status.ok()) return wp.status;
+
+  BlockLmOptions lm;
+  lm.max_iterations = options_.max_iterations;
+  BlockLmSummary summary;
+  if (Status s = wp.problem.Solve(lm, &summary); !s.ok()) {
+    return InternalError("window refinement failed: " + s.message());
   }
   rep.residuals = wp.residuals;
   rep.initial_rms = std::sqrt(2.0 * summary.initial_cost / wp.residuals);
@@ -387,9 +381,9 @@ void WindowRefiner::AddTransferResiduals(Problem* problem, size_t first,
       }
       if (data.mbs.empty()) continue;
       wp.residuals += static_cast<int>(data.mbs.size());
-      wp.problem.AddResidualBlock(new PlaneTransferCost(std::move(data)), nullptr,
-                                  a.q.coeffs().data(), a.c.data(), b.q.coeffs().data(), b.c.data(),
-                                  plane->second.data());
+      wp.Add(
+          new PlaneTransferCost(std::move(data)),
+          {a.q.coeffs().data(), a.c.data(), b.q.coeffs().data(), b.c.data(), plane->second.data()});
       road_seen = road_seen || o.plane_id == road_id_;
     }
     rep->road_pairs += road_seen ? 1 : 0;
@@ -402,10 +396,9 @@ void WindowRefiner::AddGaugeAndPriors(Problem* problem, size_t first, WindowRefi
   const Eigen::Vector3d& c0 = wp.poses[first].c;
   const double length = (wp.poses[first + 1].c - c0).norm();
   if (length > 0) {
-    wp.problem.AddResidualBlock(
-        new ceres::AutoDiffCostFunction<StepLengthResidual, 1, 3>(
-            new StepLengthResidual(c0, length, options_.gauge_step_rel_sigma)),
-        nullptr, wp.poses[first + 1].c.data());
+    wp.Add(new ceres::AutoDiffCostFunction<StepLengthResidual, 1, 3>(
+               new StepLengthResidual(c0, length, options_.gauge_step_rel_sigma)),
+           {wp.poses[first + 1].c.data()});
   }
   // (c) the road's height, once it took part in a solve (or is metric), and
   // (e) its attitude, once the references are taken (AccumulateRoadReferences:
@@ -414,18 +407,16 @@ void WindowRefiner::AddGaugeAndPriors(Problem* problem, size_t first, WindowRefi
   const auto road = wp.pis.find(road_id_);
   if (road != wp.pis.end() && rep->road_pairs > 0 &&
       (road_height_.has_value() || plane_solves_.count(road_id_))) {
-    wp.problem.AddResidualBlock(
-        new ceres::AutoDiffCostFunction<RoadHeightResidual, 1, 3>(new RoadHeightResidual(
-            road_height_.value_or(1.0 / road->second.norm()), options_.road_height_rel_sigma)),
-        nullptr, road->second.data());
+    wp.Add(new ceres::AutoDiffCostFunction<RoadHeightResidual, 1, 3>(new RoadHeightResidual(
+               road_height_.value_or(1.0 / road->second.norm()), options_.road_height_rel_sigma)),
+           {road->second.data()});
     if (road_normal_cam_) {
       const Eigen::Matrix3d R_wr = anchors_[0].world_from_cam.R();
       const double sigma_rad = DegToRad(options_.road_attitude_sigma_deg);
       for (size_t k = first; k < wp.poses.size(); ++k) {
-        wp.problem.AddResidualBlock(
-            new ceres::AutoDiffCostFunction<RoadAttitudeResidual, 2, 4, 3>(
-                new RoadAttitudeResidual(R_wr, *road_normal_cam_, sigma_rad)),
-            nullptr, wp.poses[k].q.coeffs().data(), road->second.data());
+        wp.Add(new ceres::AutoDiffCostFunction<RoadAttitudeResidual, 2, 4, 3>(
+                   new RoadAttitudeResidual(R_wr, *road_normal_cam_, sigma_rad)),
+               {wp.poses[k].q.coeffs().data(), road->second.data()});
       }
     }
   }
@@ -447,13 +438,12 @@ void WindowRefiner::AddGaugeAndPriors(Problem* problem, size_t first, WindowRefi
     // Random walk of the velocities between the steps' midpoints, dt apart.
     const double sqrt_dt = std::sqrt(0.5 * (dt1 + dt2));
     PoseBlock &a = wp.poses[k - 2], &b = wp.poses[k - 1], &c = wp.poses[k];
-    wp.problem.AddResidualBlock(
-        new ceres::AutoDiffCostFunction<MotionPriorResidual, 6, 4, 3, 4, 3, 4, 3>(
-            new MotionPriorResidual(dt1, dt2,
-                                    options_.speed_change_rel_per_sqrt_s * speed * sqrt_dt,
-                                    options_.angular_rate_change_rad_s_per_sqrt_s * sqrt_dt)),
-        nullptr, a.q.coeffs().data(), a.c.data(), b.q.coeffs().data(), b.c.data(),
-        c.q.coeffs().data(), c.c.data());
+    wp.Add(new ceres::AutoDiffCostFunction<MotionPriorResidual, 6, 4, 3, 4, 3, 4, 3>(
+               new MotionPriorResidual(dt1, dt2,
+                                       options_.speed_change_rel_per_sqrt_s * speed * sqrt_dt,
+                                       options_.angular_rate_change_rad_s_per_sqrt_s * sqrt_dt)),
+           {a.q.coeffs().data(), a.c.data(), b.q.coeffs().data(), b.c.data(), c.q.coeffs().data(),
+            c.c.data()});
   }
 }
 

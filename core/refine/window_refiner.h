@@ -51,9 +51,11 @@
 //      (docs/METHOD.md "The road's attitude").
 // The references of (c) and (e) belong to the trajectory, not the window:
 // Reset keeps them, Rescale scales the height.
-// Cost: Levenberg-Marquardt (Ceres, dense Schur on the few poses), at most
-// max_iterations; macroblocks per (pair, plane) are subsampled to
-// max_mbs_per_plane, so a solve's cost is bounded by the window size.
+// Cost: Levenberg-Marquardt (core/refine/block_lm.h: Ceres' steps, the
+// normal equations accumulated per residual block into one dense matrix of
+// the window's 30-60 tangent parameters), at most max_iterations; macroblocks
+// per (pair, plane) are subsampled to max_mbs_per_plane, so a solve's cost is
+// bounded by the window size.
 #pragma once
 
 #include <cstdint>
@@ -191,7 +193,7 @@ class WindowRefiner {
   };
   void DropOldest();
   void Reassociate(int plane_id, const Eigen::Vector3d& guess_cam, const Rigid3d& world_from_cam);
-  // Refine's parts: the Ceres problem over the window (defined in the .cc),
+  // Refine's parts: the problem over the window (defined in the .cc),
   // with the poses from index `first` on being the window's anchors.
   struct Problem;
   void AddTransferResiduals(Problem* wp, size_t first, WindowRefineReport* rep) const;
