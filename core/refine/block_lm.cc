@@ -194,7 +194,11 @@ class BlockLmProblem::Evaluator {
     JtJ_.resize(static_cast<size_t>(t) * t);
     Jtr_.resize(t);
     const Eigen::Map<const RowMajorMatrix> J(J_.data(), m, t);
-    Eigen::Map<RowMajorMatrix>(JtJ_.data(), t, t).noalias() = J.transpose() * J;
+    // J^T J's lower triangle (column-major), read below as the upper one of
+    // the row-major layout: JtJ_[a * t + b], b >= a.
+    Eigen::Map<Eigen::MatrixXd> JtJ(JtJ_.data(), t, t);
+    JtJ.setZero();
+    JtJ.selfadjointView<Eigen::Lower>().rankUpdate(J.transpose());
     Eigen::Map<Eigen::VectorXd>(Jtr_.data(), t).noalias() =
         J.transpose() * Eigen::Map<const Eigen::VectorXd>(r_.data(), m);
     for (int a = 0; a < t; ++a) {
