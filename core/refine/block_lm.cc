@@ -157,8 +157,9 @@ class BlockLmProblem::Evaluator {
  private:
   // The block's Jacobian in tangent coordinates J (row-major, m x t: a
   // quaternion's 4 columns times its plus-Jacobian), then g += J^T r and
-  // H += J^T J scattered to the blocks' offsets. Plain loops: at t <= ~21
-  // columns they beat Eigen's general products, which pack and allocate.
+  // H += J^T J scattered to the blocks' offsets. J^T J is one triangle
+  // (Eigen's symmetric rank update, half a general product's work); the
+  // buffers live across blocks, so nothing is allocated per block.
   bool Accumulate(const Residual& res, int m, Eigen::VectorXd* g, Eigen::MatrixXd* H) {
     int t = 0;
     global_.clear();
