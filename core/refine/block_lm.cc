@@ -8,6 +8,8 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include "core/common/so3.h"
+
 namespace slapse {
 namespace {
 
@@ -15,14 +17,12 @@ using RowMajorMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eig
 
 // d(Exp(d) q)/dd at d = 0 in Eigen's coefficient order (x, y, z, w): with
 // Exp(d) ~ (1, d/2), the product's vector part is v + (w d + d x v) / 2 and
-// its scalar part w - d.v / 2.
+// its scalar part w - d.v / 2 (d x v = -[v]x d).
 Eigen::Matrix<double, 4, 3> QuaternionPlusJacobian(const double* q_xyzw) {
   const Eigen::Vector3d v(q_xyzw[0], q_xyzw[1], q_xyzw[2]);
   const double w = q_xyzw[3];
   Eigen::Matrix<double, 4, 3> P;
-  P.topRows<3>() << w, v.z(), -v.y(),  //
-      -v.z(), w, v.x(),                //
-      v.y(), -v.x(), w;
+  P.topRows<3>() = w * Eigen::Matrix3d::Identity() - Skew(v);
   P.row(3) = -v.transpose();
   return 0.5 * P;
 }
