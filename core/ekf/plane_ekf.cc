@@ -481,8 +481,11 @@ std::optional<double> PlaneEkf::MedianInnovation(size_t index, const PlaneObserv
     }
     Eigen::Matrix<double, 2, 9> J;
     J << d_theta, d_t, d_pi;
-    const Eigen::Matrix2d S =
-        J * P9 * J.transpose() + (obs.variance_px2[j] + extra2) * Eigen::Matrix2d::Identity();
+    // lazyProduct: small fixed-size products (Eigen's default takes its
+    // packed general-product path at 2 + 9 + 9 coefficients).
+    const Eigen::Matrix<double, 2, 9> JP = J.lazyProduct(P9);
+    const Eigen::Matrix2d S = JP.lazyProduct(J.transpose()) +
+                              (obs.variance_px2[j] + extra2) * Eigen::Matrix2d::Identity();
     const Eigen::Vector2d r = obs.x_earlier_px[j] - z;
     chi2.push_back(r.dot(S.ldlt().solve(r)));
   }
@@ -534,8 +537,11 @@ void PlaneEkf::AccumulateMeasurements(const std::vector<TrackedObservation>& tra
   Eigen::MatrixXd& info = *info_out;
   Eigen::VectorXd& rhs = *rhs_out;
   const double extra2 = options_.extra_sigma_px * options_.extra_sigma_px;
+  // Each plane's sums are kept in fixed-size 9x9 / 9x1 accumulators and added
+  // into the dynamic system once per plane (not per macroblock).
   for (const auto& [index, obs] : tracked) {
-    const int o = PlaneOffset(index);
+    Eigen::Matrix<double, 9, 9> JtJ = Eigen::Matrix<double, 9, 9>::Zero();
+    Eigen::Matrix<double, 9, 1> Jtr = Eigen::Matrix<double, 9, 1>::Zero();
     for (size_t j = 0; j < obs->x_later_px.size(); ++j) {
       Eigen::Vector2d z;
       Eigen::Matrix<double, 2, 9> J;
@@ -550,17 +556,20 @@ void PlaneEkf::AccumulateMeasurements(const std::vector<TrackedObservation>& tra
       double w = 1.0 / var;
       const double norm_r = r.norm() / std::sqrt(var);
       if (options_.huber_k > 0 && norm_r > options_.huber_k) w *= options_.huber_k / norm_r;
-      const Eigen::Matrix<double, 9, 9> JtJ = w * J.transpose() * J;
-      const Eigen::Matrix<double, 9, 1> Jtr = w * J.transpose() * r;
-      info.block<6, 6>(kTheta, kTheta) += JtJ.topLeftCorner<6, 6>();
-      info.block<6, 3>(kTheta, o) += JtJ.topRightCorner<6, 3>();
-      info.block<3, 6>(o, kTheta) += JtJ.bottomLeftCorner<3, 6>();
-      info.block<3, 3>(o, o) += JtJ.bottomRightCorner<3, 3>();
-      rhs.segment<6>(kTheta) += Jtr.head<6>();
-      rhs.segment<3>(o) += Jtr.tail<3>();
+      // lazyProduct: as in MedianInnovation.
+      const Eigen::Matrix<double, 9, 2> wJt = w * J.transpose();
+      JtJ.noalias() += wJt.lazyProduct(J);
+      Jtr.noalias() += wJt * r;
       *sq_sum += r.squaredNorm();
       ++*count;
     }
+    const int o = PlaneOffset(index);
+    info.block<6, 6>(kTheta, kTheta) += JtJ.topLeftCorner<6, 6>();
+    info.block<6, 3>(kTheta, o) += JtJ.topRightCorner<6, 3>();
+    info.block<3, 6>(o, kTheta) += JtJ.bottomLeftCorner<3, 6>();
+    info.block<3, 3>(o, o) += JtJ.bottomRightCorner<3, 3>();
+    rhs.segment<6>(kTheta) += Jtr.head<6>();
+    rhs.segment<3>(o) += Jtr.tail<3>();
   }
   if (const int road = RoadIndex(); road >= 0 && options_.road_height_rel_sigma > 0) {
     const int o = PlaneOffset(static_cast<size_t>(road));
