@@ -45,15 +45,33 @@ struct RotationOnlyEstimator {
     models->push_back(svd.matrixU() * D * svd.matrixV().transpose());
   }
 
+  // Squared distance on the normalised image plane between dehom(R x_i) and
+  // dehom(y_i); +infinity when R x_i is not in front (z <= 1e-12).
   static void Residuals(const std::vector<X_t>& X, const std::vector<Y_t>& Y, const M_t& R,
                         std::vector<double>* squared_residuals) {
-    squared_residuals->resize(X.size());
-    for (size_t i = 0; i < X.size(); ++i) {
-      const Eigen::Vector3d p = R * X[i];
-      (*squared_residuals)[i] = p.z() > 1e-12 ? (p.hnormalized() - Y[i].hnormalized()).squaredNorm()
-                                              : std::numeric_limits<double>::infinity();
-    }
+    Scorer(X, Y).Residuals(R, squared_residuals);
   }
+
+  // Residuals with dehom(y_i) computed once per RANSAC run: the run scores a
+  // few hundred models on the same points (ransac.h's ScorerFor).
+  class Scorer {
+   public:
+    Scorer(const std::vector<X_t>& X, const std::vector<Y_t>& Y) : x_(X), y_(Y.size()) {
+      for (size_t i = 0; i < Y.size(); ++i) y_[i] = Y[i].hnormalized();
+    }
+    void Residuals(const M_t& R, std::vector<double>* squared_residuals) const {
+      squared_residuals->resize(x_.size());
+      for (size_t i = 0; i < x_.size(); ++i) {
+        const Eigen::Vector3d p = R * x_[i];
+        (*squared_residuals)[i] = p.z() > 1e-12 ? (p.hnormalized() - y_[i]).squaredNorm()
+                                                : std::numeric_limits<double>::infinity();
+      }
+    }
+
+   private:
+    const std::vector<X_t>& x_;
+    std::vector<Eigen::Vector2d> y_;
+  };
 };
 
 Status ValidateInputs(const std::vector<Correspondence>& correspondences,

@@ -10,15 +10,21 @@
 namespace slapse {
 namespace {
 
-// Squared residuals over the points of `mask` under (R, t); their sum.
-double MaskedCost(const std::vector<Eigen::Vector3d>& rays_earlier,
+// Sampson distances of every correspondence under E, into *r.
+void AllResiduals(const std::vector<Eigen::Vector3d>& rays_earlier,
                   const std::vector<Eigen::Vector3d>& rays_later, const Eigen::Matrix3d& E,
-                  const std::vector<char>& mask) {
+                  std::vector<double>* r) {
+  r->resize(rays_earlier.size());
+  for (size_t i = 0; i < rays_earlier.size(); ++i) {
+    (*r)[i] = SampsonDistance(E, rays_earlier[i], rays_later[i]);
+  }
+}
+
+// Sum of r_i^2 over the points of `mask`.
+double MaskedCost(const std::vector<double>& r, const std::vector<char>& mask) {
   double cost = 0.0;
   for (size_t i = 0; i < mask.size(); ++i) {
-    if (!mask[i]) continue;
-    const double r = SampsonDistance(E, rays_earlier[i], rays_later[i]);
-    cost += r * r;
+    if (mask[i]) cost += r[i] * r[i];
   }
   return cost;
 }
@@ -75,10 +81,14 @@ namespace {
 // Gauss-Newton system H = sum J^T J, g = sum J^T r with J = dr/dE dE/d(theta,
 // delta), damped (A = H + lambda diag(H)) until the step lowers the cost, up
 // to 6 times. True when a step was taken (R, t and lambda updated).
+// *residuals holds every point's Sampson distance under (R, t) on entry and
+// on return: a candidate's distances are computed for all points, so an
+// accepted step leaves those the next re-selection needs.
 bool LevenbergMarquardtStep(const std::vector<Eigen::Vector3d>& rays_earlier,
                             const std::vector<Eigen::Vector3d>& rays_later,
                             const std::vector<char>& selected, Eigen::Matrix3d* R_io,
-                            Eigen::Vector3d* t_io, double* lambda_io) {
+                            Eigen::Vector3d* t_io, double* lambda_io,
+                            std::vector<double>* residuals, std::vector<double>* scratch) {
   Eigen::Matrix3d& R = *R_io;
   Eigen::Vector3d& t = *t_io;
   double& lambda = *lambda_io;
@@ -88,7 +98,6 @@ bool LevenbergMarquardtStep(const std::vector<Eigen::Vector3d>& rays_earlier,
   const Eigen::Matrix3d E_now = Skew(t) * R;
   Eigen::Matrix<double, 5, 5> H = Eigen::Matrix<double, 5, 5>::Zero();
   Eigen::Matrix<double, 5, 1> g = Eigen::Matrix<double, 5, 1>::Zero();
-  double cost = 0.0;
   Eigen::Matrix<double, 1, 9> d_r_d_E;
   for (size_t i = 0; i < n; ++i) {
     if (!selected[i]) continue;
@@ -96,8 +105,8 @@ bool LevenbergMarquardtStep(const std::vector<Eigen::Vector3d>& rays_earlier,
     const Eigen::Matrix<double, 1, 5> J = d_r_d_E * dE_dp;
     H.noalias() += J.transpose() * J;
     g.noalias() += J.transpose() * r;
-    cost += r * r;
   }
+  const double cost = MaskedCost(*residuals, selected);
   for (int attempt = 0; attempt < 6; ++attempt) {
     Eigen::Matrix<double, 5, 5> A = H;
     A.diagonal() += lambda * H.diagonal() + Eigen::Matrix<double, 5, 1>::Constant(1e-15);
@@ -105,11 +114,12 @@ bool LevenbergMarquardtStep(const std::vector<Eigen::Vector3d>& rays_earlier,
     if (!delta.allFinite()) return false;
     const Eigen::Matrix3d R_new = R * ExpSO3(delta.head<3>());
     const Eigen::Vector3d t_new = (t + basis * delta.tail<2>()).normalized();
-    const double new_cost =
-        MaskedCost(rays_earlier, rays_later, Eigen::Matrix3d(Skew(t_new) * R_new), selected);
+    AllResiduals(rays_earlier, rays_later, Eigen::Matrix3d(Skew(t_new) * R_new), scratch);
+    const double new_cost = MaskedCost(*scratch, selected);
     if (new_cost < cost) {
       R = R_new;
       t = t_new;
+      residuals->swap(*scratch);
       lambda = std::max(1e-10, 0.1 * lambda);
       return true;
     }
@@ -138,12 +148,15 @@ RelativePoseRefineReport RefineRelativePose(const std::vector<Eigen::Vector3d>& 
   const int num_stages = 3 + std::max(1, options.max_final_stages);
 
   std::vector<char> selected(n, 0), previous(n, 0);
+  // Every point's Sampson distance under the current (R, t), kept current by
+  // the steps.
+  std::vector<double> residuals, scratch;
+  AllResiduals(rays_earlier, rays_later, Eigen::Matrix3d(Skew(t) * R), &residuals);
   for (int stage = 0; stage < num_stages; ++stage) {
     const double threshold = options.max_error * (stage < 3 ? kWideningMultipliers[stage] : 1.0);
-    const Eigen::Matrix3d E = Skew(t) * R;
     int count = 0;
     for (size_t i = 0; i < n; ++i) {
-      selected[i] = std::abs(SampsonDistance(E, rays_earlier[i], rays_later[i])) <= threshold;
+      selected[i] = std::abs(residuals[i]) <= threshold;
       count += selected[i];
     }
     if (count < kMinInliers) return report;
@@ -154,16 +167,17 @@ RelativePoseRefineReport RefineRelativePose(const std::vector<Eigen::Vector3d>& 
     double lambda = 1e-4;
     for (int step = 0; step < options.steps_per_stage; ++step) {
       // At a minimum of this stage's cost: no step is accepted.
-      if (!LevenbergMarquardtStep(rays_earlier, rays_later, selected, &R, &t, &lambda)) break;
+      if (!LevenbergMarquardtStep(rays_earlier, rays_later, selected, &R, &t, &lambda, &residuals,
+                                  &scratch)) {
+        break;
+      }
     }
   }
   if (!R.allFinite() || !t.allFinite()) return report;
 
-  const Eigen::Matrix3d E = Skew(t) * R;
   report.inlier_mask.assign(n, 0);
   for (size_t i = 0; i < n; ++i) {
-    report.inlier_mask[i] =
-        std::abs(SampsonDistance(E, rays_earlier[i], rays_later[i])) <= options.max_error;
+    report.inlier_mask[i] = std::abs(residuals[i]) <= options.max_error;
     report.num_inliers += report.inlier_mask[i];
   }
   if (report.num_inliers < kMinInliers) {
