@@ -68,22 +68,21 @@ double ExpectedMergedVariance(bool has_direct, int n_b, double p, double sigma_p
   return mass > 0 ? sum / mass : INFINITY;
 }
 
-std::optional<MergedMv> MergeCell(const std::vector<MvCandidate>& candidates, double sigma_px,
+std::optional<MergedMv> MergeCell(const MvCandidate* candidates, size_t n, double sigma_px,
                                   const MergeOptions& options) {
-  const size_t n = candidates.size();
   if (n == 0) return std::nullopt;
-  std::vector<Eigen::Vector2d> disp(n);
-  std::vector<double> var(n);
-  for (size_t i = 0; i < n; ++i) {
-    disp[i] = candidates[i].earlier_px - candidates[i].later_px;
-    var[i] = (candidates[i].direct ? 1.0 : 2.0) * sigma_px * sigma_px;
-  }
   // Two candidates agree when their displacements differ by less than the gate
-  // for the variance of their difference.
+  // for the variance of their difference (variance sigma^2 direct, 2 sigma^2
+  // indirect). Computed per test: a cell has a handful of candidates, and
+  // buffers here were an allocation per cell.
+  auto disp = [&](size_t i) -> Eigen::Vector2d {
+    return candidates[i].earlier_px - candidates[i].later_px;
+  };
+  auto var = [&](size_t i) { return (candidates[i].direct ? 1.0 : 2.0) * sigma_px * sigma_px; };
   auto agree = [&](size_t i, size_t j) {
     const double gate =
-        std::max(options.gate_sigmas * std::sqrt(var[i] + var[j]), options.gate_min_px);
-    return (disp[i] - disp[j]).norm() <= gate;
+        std::max(options.gate_sigmas * std::sqrt(var(i) + var(j)), options.gate_min_px);
+    return (disp(i) - disp(j)).norm() <= gate;
   };
   // Seed: the candidate that the most weight of *other* candidates agrees
   // with (ties: the heavier, i.e. direct, candidate).
@@ -121,6 +120,11 @@ std::optional<MergedMv> MergeCell(const std::vector<MvCandidate>& candidates, do
   out.earlier_px /= weight_sum;
   out.variance_px2 = MergedVariance(out.n_direct, out.n_indirect, sigma_px);
   return out;
+}
+
+std::optional<MergedMv> MergeCell(const std::vector<MvCandidate>& candidates, double sigma_px,
+                                  const MergeOptions& options) {
+  return MergeCell(candidates.data(), candidates.size(), sigma_px, options);
 }
 
 SegmentMerger::SegmentMerger(int width_px, int height_px, double sigma_px, MergeOptions options)
@@ -400,7 +404,8 @@ AnchorPair SegmentMerger::Build(const FrameRecord& later) const {
   pair.mb_rows = mb_rows_;
   pair.type = SegmentTypeOf(earlier_->type == PictureType::kI, later.type == PictureType::kI);
 
-  std::vector<std::vector<MvCandidate>> cells(static_cast<size_t>(mb_cols_) * mb_rows_);
+  // Every candidate with its cell, in the order found; bucketed by cell below.
+  std::vector<std::pair<int, MvCandidate>> found;
   // Direct: the later P frame's past vectors refer to the earlier anchor.
   if (options_.use_direct && later.type == PictureType::kP &&
       later.prev_anchor_index == earlier_->index && !later.corrupt) {
@@ -408,7 +413,7 @@ AnchorPair SegmentMerger::Build(const FrameRecord& later) const {
       const Eigen::Vector2d start(mv->x_px, mv->y_px);
       const int cell = CellOf(start);
       if (cell < 0) continue;
-      cells[cell].push_back({start, start + Eigen::Vector2d(mv->dx_px, mv->dy_px), true});
+      found.push_back({cell, {start, start + Eigen::Vector2d(mv->dx_px, mv->dy_px), true}});
     }
   }
   // Indirect: B blocks with both a past (f) and a future (g) vector. Under a
@@ -449,12 +454,25 @@ AnchorPair SegmentMerger::Build(const FrameRecord& later) const {
         const Eigen::Vector2d end = y + Eigen::Vector2d(f->dx_px, f->dy_px);
         const int cell = CellOf(start);
         if (cell < 0) continue;
-        cells[cell].push_back({start, end, false});
+        found.push_back({cell, {start, end, false}});
       }
     }
   }
-  for (size_t cell = 0; cell < cells.size(); ++cell) {
-    const auto merged = MergeCell(cells[cell], sigma_px_, options_);
+  // A stable counting sort by cell (each cell's candidates keep their order):
+  // cell c's are candidates[begin[c] .. begin[c + 1]).
+  const size_t num_cells = static_cast<size_t>(mb_cols_) * mb_rows_;
+  std::vector<int> begin(num_cells + 1, 0);
+  for (const auto& [cell, candidate] : found) ++begin[cell + 1];
+  for (size_t c = 0; c < num_cells; ++c) begin[c + 1] += begin[c];
+  std::vector<MvCandidate> candidates(found.size());
+  {
+    std::vector<int> at(begin.begin(), begin.end() - 1);
+    for (const auto& [cell, candidate] : found) candidates[at[cell]++] = candidate;
+  }
+  for (size_t cell = 0; cell < num_cells; ++cell) {
+    const auto merged =
+        MergeCell(candidates.data() + begin[cell],
+                  static_cast<size_t>(begin[cell + 1] - begin[cell]), sigma_px_, options_);
     if (!merged.has_value()) continue;
     Correspondence c;
     c.x_later_px = merged->later_px;

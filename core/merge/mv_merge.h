@@ -95,6 +95,9 @@ struct MergedMv {
 // when there are none or when no two of several candidates agree.
 std::optional<MergedMv> MergeCell(const std::vector<MvCandidate>& candidates, double sigma_px,
                                   const MergeOptions& options);
+// The same over candidates[0 .. n).
+std::optional<MergedMv> MergeCell(const MvCandidate* candidates, size_t n, double sigma_px,
+                                  const MergeOptions& options);
 
 // Variance per axis of the inverse-variance merge of n_direct direct and
 // n_indirect indirect IMVs: 2 sigma^2 / (2 n_direct + n_indirect).
