@@ -200,6 +200,51 @@ TEST(MergeTest, WeightedStartEndMergeIsExactForAffineMotion) {
             0.3);
 }
 
+// H.264 splits a near-road macroblock into partitions whose vectors differ
+// by the flow's change between them; the gate allows that change
+// (gate_flow_gradient_per_px) but not a jump between two surfaces.
+TEST(MergeTest, FlowGradientGateKeepsPartitionsOfOneSurfaceAndRejectsMixedCells) {
+  // The road at 10 fps, 70 km/h, ~150 rows below the horizon: the
+  // displacement (earlier - later) grows 0.2 px per px across and 0.4 px per
+  // px down the image around 40 px.
+  const Eigen::Vector2d centre(600, 330), d0(6, 40);
+  Eigen::Matrix2d gradient;
+  gradient << 0.2, 0.0, 0.0, 0.4;
+  std::vector<MvCandidate> partitions;
+  for (const Eigen::Vector2d offset : {Eigen::Vector2d(-4, -4), Eigen::Vector2d(4, -4),
+                                       Eigen::Vector2d(-4, 4), Eigen::Vector2d(4, 4)}) {
+    const Eigen::Vector2d later = centre + offset;
+    partitions.push_back({later, later + d0 + gradient * offset, true});
+  }
+  MergeOptions positions_ignored;
+  positions_ignored.gate_flow_gradient_per_px = 0.0;
+  EXPECT_FALSE(MergeCell(partitions, kSigma, positions_ignored))
+      << "8 px apart, the partitions differ by 1.6-3.6 px: no two agree without the gradient";
+  MergeOptions with_gradient;
+  with_gradient.gate_flow_gradient_per_px = 0.02;
+  const auto merged = MergeCell(partitions, kSigma, with_gradient);
+  ASSERT_TRUE(merged);
+  EXPECT_EQ(merged->n_direct, 4);
+  // Start and end points merged: exact for the affine field.
+  EXPECT_LT((merged->earlier_px - (merged->later_px + d0 + gradient * (merged->later_px - centre)))
+                .norm(),
+            1e-9);
+  // A facade's block beside the sky's, 8 px apart: 10 px against 3 px is a
+  // jump, not a gradient (allowed: 1.41 + 0.02 * 8 * 3 = 1.89 px).
+  const std::vector<MvCandidate> mixed = {{{100, 100}, {110, 100}, true},
+                                          {{108, 100}, {111, 100}, true}};
+  EXPECT_FALSE(MergeCell(mixed, kSigma, with_gradient));
+  // Candidates at the same place get no allowance, and an indirect one none
+  // at all (its later point moves with a wrong g): a wrong match 3 px off
+  // still loses against two that agree.
+  const std::vector<MvCandidate> same_place = {{{100, 100}, {140, 100}, true},
+                                               {{100, 100}, {140.2, 100}, false},
+                                               {{100, 100}, {143, 100}, false}};
+  const auto kept = MergeCell(same_place, kSigma, with_gradient);
+  ASSERT_TRUE(kept);
+  EXPECT_EQ(kept->n_direct + kept->n_indirect, 2);
+}
+
 TEST(MergeTest, ConsensusRejectsAnOutlierAndAmbiguousCells) {
   std::vector<MvCandidate> cands = {{{0, 0}, {2, 0}, true},
                                     {{0, 0}, {2.1, 0.1}, false},

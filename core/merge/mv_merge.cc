@@ -79,10 +79,19 @@ std::optional<MergedMv> MergeCell(const MvCandidate* candidates, size_t n, doubl
     return candidates[i].earlier_px - candidates[i].later_px;
   };
   auto var = [&](size_t i) { return (candidates[i].direct ? 1.0 : 2.0) * sigma_px * sigma_px; };
+  // Two direct candidates at different places in the cell (partitions of
+  // one macroblock) may also differ by the flow's change between them
+  // (MergeOptions::gate_flow_gradient_per_px). Not an indirect one: its
+  // later point y + g moves with a wrong g, and so would the allowance.
   auto agree = [&](size_t i, size_t j) {
-    const double gate =
-        std::max(options.gate_sigmas * std::sqrt(var(i) + var(j)), options.gate_min_px);
-    return (disp(i) - disp(j)).norm() <= gate;
+    const Eigen::Vector2d d_i = disp(i), d_j = disp(j);
+    double gate = std::max(options.gate_sigmas * std::sqrt(var(i) + var(j)), options.gate_min_px);
+    if (candidates[i].direct && candidates[j].direct) {
+      gate += options.gate_flow_gradient_per_px *
+              (candidates[i].later_px - candidates[j].later_px).norm() *
+              std::min(d_i.norm(), d_j.norm());
+    }
+    return (d_i - d_j).norm() <= gate;
   };
   // Seed: the candidate that the most weight of *other* candidates agrees
   // with (ties: the heavier, i.e. direct, candidate).

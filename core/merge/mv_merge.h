@@ -37,6 +37,17 @@ struct MergeOptions {
   // max(gate_sigmas * sigma of the difference, gate_min_px).
   double gate_sigmas = 4.0;
   double gate_min_px = 1.0;
+  // The flow changes across a cell: two direct candidates at different
+  // places in it (H.264's partitions of one macroblock) may differ by that
+  // change. Their gate widens by gate_flow_gradient_per_px x the distance
+  // between their later points (px) x the smaller displacement (px): the
+  // flow's relative change per px. On a road plane the change is ~2 / (rows
+  // below the horizon) per px, e.g. 0.02 / px 100 rows down; at 10 fps and
+  // 70 km/h two 8x8 partitions 8 px apart there differ by 3-4 px, and with 0
+  // (positions ignored) the cell was dropped. Indirect candidates get no
+  // allowance: their later point y + g moves with a wrong g. 0.02 chosen on
+  // the tuning drives (docs/TRAJECTORY.md "Session 25").
+  double gate_flow_gradient_per_px = 0.02;
   bool use_direct = true;
   bool use_indirect = true;
   // IPPP streams (no B frames, one frame between anchors): P-frame vector
