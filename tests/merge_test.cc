@@ -234,8 +234,13 @@ TEST(MergeTest, FlowGradientGateKeepsPartitionsOfOneSurfaceAndRejectsMixedCells)
   const std::vector<MvCandidate> mixed = {{{100, 100}, {110, 100}, true},
                                           {{108, 100}, {111, 100}, true}};
   EXPECT_FALSE(MergeCell(mixed, kSigma, with_gradient));
-  // Candidates at the same place get no allowance, and an indirect one none
-  // at all (its later point moves with a wrong g): a wrong match 3 px off
+  // An indirect candidate gets no allowance (its later point moves with a
+  // wrong g): 8 px from a direct one, 2.5 px off at 40 px is a disagreement
+  // (allowed 1.73 px; with the allowance it would be 8.1 px).
+  const std::vector<MvCandidate> direct_and_indirect = {{{100, 100}, {140, 100}, true},
+                                                        {{108, 100}, {150.5, 100}, false}};
+  EXPECT_FALSE(MergeCell(direct_and_indirect, kSigma, with_gradient));
+  // Candidates at the same place get no allowance: a wrong match 3 px off
   // still loses against two that agree.
   const std::vector<MvCandidate> same_place = {{{100, 100}, {140, 100}, true},
                                                {{100, 100}, {140.2, 100}, false},
