@@ -296,6 +296,37 @@ TEST(NoMotionTest, StillStreamSaysNoReliableMotion) {
   }
 }
 
+// Merging options for the pan streams: one pair per segment, so the
+// references stay visible.
+MergeOptions PanMergeOptions(MergeOptions::UncertainRefs uncertain, bool pyramid_top_b = true) {
+  MergeOptions mo;
+  mo.uncertain_refs = uncertain;
+  mo.pyramid_top_b = pyramid_top_b;
+  mo.chain_min_frames = 1;
+  return mo;
+}
+
+// Calls fn(later anchor index, correspondence, whether the later P frame's
+// reference is uncertain, how far the displacement misses the pan's in px)
+// for every merged correspondence of a pan stream.
+template <typename Fn>
+void ForEachPanCorrespondence(const std::string& path, const MergeOptions& mo, Fn fn) {
+  auto reader = MvReader::Open(path);
+  if (!reader.ok()) return;
+  SegmentMerger merger(320, 240, (*reader)->info().mv_sigma_px(), mo);
+  FrameRecord f;
+  while ((*reader)->Next(&f).ok()) {
+    const bool uncertain_p = f.type == PictureType::kP && !f.reference_certain;
+    auto pair = merger.Push(f);
+    if (!pair.has_value()) continue;
+    const double steps = static_cast<double>(pair->earlier_index - pair->later_index);
+    for (const Correspondence& c : pair->correspondences) {
+      fn(pair->later_index, c, uncertain_p,
+         Eigen::Vector2d(c.x_earlier_px - c.x_later_px - steps * Eigen::Vector2d(kVx, kVy)));
+    }
+  }
+}
+
 // Merged pairs of a pan stream under `uncertain`: the fraction of
 // correspondences whose displacement misses the pan's by more than 1 px (a
 // vector to another reference than the pair's earlier anchor), and how many.
@@ -306,29 +337,16 @@ struct PairErrors {
 PairErrors MergePan(const std::string& path, MergeOptions::UncertainRefs uncertain,
                     bool pyramid_top_b = true) {
   PairErrors out;
-  auto reader = MvReader::Open(path);
-  if (!reader.ok()) return out;
-  MergeOptions mo;
-  mo.uncertain_refs = uncertain;
-  mo.pyramid_top_b = pyramid_top_b;
-  mo.chain_min_frames = 1;  // one pair per segment: the references stay visible
-  SegmentMerger merger(320, 240, (*reader)->info().mv_sigma_px(), mo);
-  FrameRecord f;
-  while ((*reader)->Next(&f).ok()) {
-    const bool uncertain_p = f.type == PictureType::kP && !f.reference_certain;
-    auto pair = merger.Push(f);
-    if (!pair.has_value()) continue;
-    const double steps = static_cast<double>(pair->earlier_index - pair->later_index);
-    for (const Correspondence& c : pair->correspondences) {
-      const Eigen::Vector2d d = c.x_earlier_px - c.x_later_px;
-      ++out.correspondences;
-      out.from_uncertain += uncertain_p && c.n_direct > 0;
-      const bool wrong = (d - steps * Eigen::Vector2d(kVx, kVy)).norm() > 1.0;
-      out.wrong += wrong;
-      out.with_indirect += c.n_indirect > 0;
-      out.wrong_with_indirect += wrong && c.n_indirect > 0;
-    }
-  }
+  ForEachPanCorrespondence(
+      path, PanMergeOptions(uncertain, pyramid_top_b),
+      [&](int64_t, const Correspondence& c, bool uncertain_p, const Eigen::Vector2d& error_px) {
+        ++out.correspondences;
+        out.from_uncertain += uncertain_p && c.n_direct > 0;
+        const bool wrong = error_px.norm() > 1.0;
+        out.wrong += wrong;
+        out.with_indirect += c.n_indirect > 0;
+        out.wrong_with_indirect += wrong && c.n_indirect > 0;
+      });
   return out;
 }
 
@@ -337,19 +355,11 @@ PairErrors MergePan(const std::string& path, MergeOptions::UncertainRefs uncerta
 std::map<std::pair<int64_t, int>, Eigen::Vector2d> PanCellErrors(const std::string& path,
                                                                  const MergeOptions& mo) {
   std::map<std::pair<int64_t, int>, Eigen::Vector2d> out;
-  auto reader = MvReader::Open(path);
-  if (!reader.ok()) return out;
-  SegmentMerger merger(320, 240, (*reader)->info().mv_sigma_px(), mo);
-  FrameRecord f;
-  while ((*reader)->Next(&f).ok()) {
-    auto pair = merger.Push(f);
-    if (!pair.has_value()) continue;
-    const double steps = static_cast<double>(pair->earlier_index - pair->later_index);
-    for (const Correspondence& c : pair->correspondences) {
-      out[{pair->later_index, c.mb_index}] =
-          (c.x_earlier_px - c.x_later_px) - steps * Eigen::Vector2d(kVx, kVy);
-    }
-  }
+  ForEachPanCorrespondence(
+      path, mo,
+      [&](int64_t later_index, const Correspondence& c, bool, const Eigen::Vector2d& error_px) {
+        out[{later_index, c.mb_index}] = error_px;
+      });
   return out;
 }
 
@@ -407,9 +417,7 @@ TEST(ReferenceTest, BPyramidThreeRefsAreMarkedAndNotMixed) {
   // pyramid's previous B frame (2 frames off, (-3, 1) px) and those cells drop
   // out. So: every cell lost against direct only is one whose top-B candidate
   // alone misses the direct one by more than the merge gate, and most stay.
-  MergeOptions mo;
-  mo.uncertain_refs = U::kConsistent;
-  mo.chain_min_frames = 1;
+  const MergeOptions mo = PanMergeOptions(U::kConsistent);
   const auto both = PanCellErrors(dir + "/bpyr.ts", mo);
   MergeOptions direct_mo = mo, top_b_mo = mo;
   direct_mo.use_indirect = false;
@@ -423,8 +431,7 @@ TEST(ReferenceTest, BPyramidThreeRefsAreMarkedAndNotMixed) {
     ASSERT_TRUE(reader.ok());
     sigma_px = (*reader)->info().mv_sigma_px();
   }
-  const double gate_px =
-      std::max(mo.gate_sigmas * std::sqrt(3.0) * sigma_px, mo.gate_min_px);  // sigma^2 + 2 sigma^2
+  const double gate_px = MergeNoiseGatePx(true, false, sigma_px, mo);  // direct against top B
   int lost = 0, lost_without_disagreement = 0;
   for (const auto& [cell, error_px] : direct) {
     if (both.count(cell) != 0) continue;

@@ -68,24 +68,30 @@ double ExpectedMergedVariance(bool has_direct, int n_b, double p, double sigma_p
   return mass > 0 ? sum / mass : INFINITY;
 }
 
+double MergeNoiseGatePx(bool a_direct, bool b_direct, double sigma_px,
+                        const MergeOptions& options) {
+  const double var_a = (a_direct ? 1.0 : 2.0) * sigma_px * sigma_px;
+  const double var_b = (b_direct ? 1.0 : 2.0) * sigma_px * sigma_px;
+  return std::max(options.gate_sigmas * std::sqrt(var_a + var_b), options.gate_min_px);
+}
+
 std::optional<MergedMv> MergeCell(const MvCandidate* candidates, size_t n, double sigma_px,
                                   const MergeOptions& options) {
   if (n == 0) return std::nullopt;
   // Two candidates agree when their displacements differ by less than the gate
-  // for the variance of their difference (variance sigma^2 direct, 2 sigma^2
-  // indirect). Computed per test: a cell has a handful of candidates, and
-  // buffers here were an allocation per cell.
+  // for the variance of their difference (MergeNoiseGatePx). Computed per
+  // test: a cell has a handful of candidates, and buffers here were an
+  // allocation per cell.
   auto disp = [&](size_t i) -> Eigen::Vector2d {
     return candidates[i].earlier_px - candidates[i].later_px;
   };
-  auto var = [&](size_t i) { return (candidates[i].direct ? 1.0 : 2.0) * sigma_px * sigma_px; };
   // Two direct candidates at different places in the cell (partitions of
   // one macroblock) may also differ by the flow's change between them
   // (MergeOptions::gate_flow_gradient_per_px). Not an indirect one: its
   // later point y + g moves with a wrong g, and so would the allowance.
   auto agree = [&](size_t i, size_t j) {
     const Eigen::Vector2d d_i = disp(i), d_j = disp(j);
-    double gate = std::max(options.gate_sigmas * std::sqrt(var(i) + var(j)), options.gate_min_px);
+    double gate = MergeNoiseGatePx(candidates[i].direct, candidates[j].direct, sigma_px, options);
     if (candidates[i].direct && candidates[j].direct) {
       gate += options.gate_flow_gradient_per_px *
               (candidates[i].later_px - candidates[j].later_px).norm() *

@@ -102,6 +102,12 @@ struct MergedMv {
   int n_direct = 0, n_indirect = 0;
 };
 
+// The part of the consensus gate from the MV noise, px: two candidates agree
+// within max(gate_sigmas * sigma of their difference, gate_min_px), a
+// direct one having variance sigma_px^2 and an indirect one 2 sigma_px^2
+// (MergeCell adds the flow's change between two direct ones).
+double MergeNoiseGatePx(bool a_direct, bool b_direct, double sigma_px, const MergeOptions& options);
+
 // Gates `candidates` by consensus and merges the in-line ones. Returns nothing
 // when there are none or when no two of several candidates agree.
 std::optional<MergedMv> MergeCell(const std::vector<MvCandidate>& candidates, double sigma_px,
