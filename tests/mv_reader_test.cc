@@ -10,6 +10,7 @@
 
 #include <gtest/gtest.h>
 
+#include "core/mv/mb_texture.h"
 #include "tests/test_streams.h"
 
 namespace slapse {
@@ -239,6 +240,76 @@ TEST(MvReaderTest, SmallProbeSameFramesAndLumaOnlyWhenWanted) {
     const size_t plane =
         static_cast<size_t>(b->get()->info().width_px) * b->get()->info().height_px;
     EXPECT_EQ(fb[i].luma.size(), fb[i].index % 2 == 1 ? plane : 0u) << "frame " << fb[i].index;
+  }
+}
+
+// MbTextureMinEigen on patterns with a known structure tensor: a flat
+// block and 1-D stripes (the aperture problem) have lambda_min 0; a sum of
+// triangle waves a tri(x) + b tri(y) (slopes +-a, +-b, signs uncorrelated
+// over a block) has the mean tensor diag(a^2, b^2), so lambda_min =
+// min(a, b)^2; doubling the contrast quadruples it.
+TEST(MbTextureTest, KnownTensorsFlatStripesAndTwoDimensionalTexture) {
+  constexpr int kW = 64, kH = 48;
+  auto tri = [](int v) { return v % 8 < 4 ? v % 8 : 8 - v % 8; };
+  auto image = [&](auto intensity) {
+    std::vector<uint8_t> img(kW * kH);
+    for (int y = 0; y < kH; ++y) {
+      for (int x = 0; x < kW; ++x) img[y * kW + x] = static_cast<uint8_t>(intensity(x, y));
+    }
+    return img;
+  };
+  const auto flat = image([](int, int) { return 90; });
+  const auto stripes = image([&](int x, int) { return 60 + 9 * tri(x); });
+  const auto texture = image([&](int x, int y) { return 40 + 3 * tri(x) + 5 * tri(y); });
+  const auto texture2 = image([&](int x, int y) { return 40 + 6 * tri(x) + 10 * tri(y); });
+  const auto t_flat = MbTextureMinEigen(flat.data(), kW, kW, kH);
+  const auto t_stripes = MbTextureMinEigen(stripes.data(), kW, kW, kH);
+  const auto t_tex = MbTextureMinEigen(texture.data(), kW, kW, kH);
+  const auto t_tex2 = MbTextureMinEigen(texture2.data(), kW, kW, kH);
+  ASSERT_EQ(t_flat.size(), static_cast<size_t>(MbCount(kW) * MbCount(kH)));
+  for (size_t i = 0; i < t_flat.size(); ++i) {
+    EXPECT_EQ(t_flat[i], 0.0f) << i;
+    EXPECT_NEAR(t_stripes[i], 0.0f, 1e-6) << i;
+  }
+  // Interior cells (the border ones clamp their differences at the frame's edge).
+  for (int row = 1; row + 1 < MbCount(kH); ++row) {
+    for (int col = 1; col + 1 < MbCount(kW); ++col) {
+      const size_t i = static_cast<size_t>(row) * MbCount(kW) + col;
+      EXPECT_NEAR(t_tex[i], 9.0, 1e-5) << "cell " << col << "," << row;
+      EXPECT_NEAR(t_tex2[i], 36.0, 1e-4) << "cell " << col << "," << row;
+    }
+  }
+  // A frame whose size is no multiple of 16: partial cells, no read past the plane.
+  const auto partial = MbTextureMinEigen(texture.data(), kW, 40, 20);
+  EXPECT_EQ(partial.size(), static_cast<size_t>(MbCount(40) * MbCount(20)));
+}
+
+// The reader hands out every anchor's texture on the MB grid (a textured pan:
+// median far above a flat block's 0), B frames none, and none when asked not to.
+TEST(MvReaderTest, AnchorsCarryTheirMacroblockTexture) {
+  const std::string path = MakeTempDir("texture") + "/pan.ts";
+  EncoderOptions eo;
+  eo.b_frames = 3;
+  ASSERT_TRUE(WritePan(path, eo, 13, kVx, kVy).ok());
+  for (const bool on : {true, false}) {
+    MvReaderOptions options;
+    options.mb_texture = on;
+    auto reader = MvReader::Open(path, options);
+    ASSERT_TRUE(reader.ok());
+    Status end;
+    const auto frames = ReadAll(reader->get(), &end);
+    ASSERT_EQ(frames.size(), 13u);
+    const size_t cells = static_cast<size_t>(MbCount((*reader)->info().width_px)) *
+                         MbCount((*reader)->info().height_px);
+    for (const FrameRecord& f : frames) {
+      if (!on || !IsAnchor(f.type)) {
+        EXPECT_TRUE(f.mb_texture.empty()) << "frame " << f.index;
+        continue;
+      }
+      ASSERT_EQ(f.mb_texture.size(), cells) << "frame " << f.index;
+      std::vector<double> t(f.mb_texture.begin(), f.mb_texture.end());
+      EXPECT_GT(Median(t), 1.0) << "frame " << f.index;
+    }
   }
 }
 

@@ -58,6 +58,11 @@ struct FrameRecord {
   // Decoded luma plane (width x height, row-major), only when
   // MvReaderOptions::keep_luma is set; empty otherwise.
   std::vector<uint8_t> luma;
+  // Anchor frames (I, P) when MvReaderOptions::mb_texture is set: each
+  // macroblock's texture, MbTextureMinEigen (core/mv/mb_texture.h), row-major
+  // over the MB grid, (levels / px)^2; empty otherwise (B frames, a frame
+  // whose size differs from the stream's first).
+  std::vector<float> mb_texture;
 };
 
 // Facts about the stream known after opening (and refined while reading).

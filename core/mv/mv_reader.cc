@@ -14,6 +14,7 @@ extern "C" {
 #include <libswscale/swscale.h>
 }
 
+#include "core/mv/mb_texture.h"
 #include "core/mv/mpeg2_syntax.h"
 
 namespace slapse {
@@ -322,6 +323,11 @@ void MvReader::Collect(AVFrame* f) {
       std::memcpy(rec.luma.data() + static_cast<size_t>(y) * f->width,
                   f->data[0] + static_cast<ptrdiff_t>(y) * f->linesize[0], f->width);
     }
+  }
+
+  if (options_.mb_texture && IsAnchor(rec.type) && f->data[0] != nullptr &&
+      f->width == base_width_px_ && f->height == base_height_px_) {
+    rec.mb_texture = MbTextureMinEigen(f->data[0], f->linesize[0], f->width, f->height);
   }
 
   // A P frame's past vectors refer to its previous anchor only when the

@@ -42,6 +42,10 @@ struct MvReaderOptions {
   // the server: only while someone looks at the overlays); unset = always.
   // A frame not wanted has no luma, and the reader copies nothing.
   std::function<bool()> luma_wanted;
+  // Compute each anchor frame's per-macroblock texture (FrameRecord::
+  // mb_texture), which merging uses to drop vectors of flat blocks
+  // (MergeOptions::min_mb_texture). About 64 pixel reads per macroblock.
+  bool mb_texture = true;
   // Bytes FFmpeg may read to identify the input and its streams
   // (AVFormatContext.probesize). The MPEG-TS demuxer also keeps this much of
   // a byte stream for seeking back while it probes, so a reader's I/O buffer
