@@ -18,6 +18,9 @@
 // P fields with N > 1) are compared instead: each correspondence's earlier
 // point against the later MB centre's point transferred through its plane
 // into the earlier anchor; the flow bins are then the pair's true flow.
+// With --texture, the anchor P frames' vectors by their block's texture
+// (the merge's texture gate, MergeOptions::min_mb_texture): sky blocks and
+// plane blocks per bin, and how right the plane blocks' vectors are.
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -165,16 +168,68 @@ void AddFrame(const slapse::GroundTruth& gt, const slapse::FrameRecord& frame, T
   }
 }
 
+// --texture: the anchor P frames' vectors by their block's texture
+// (FrameRecord::mb_texture, lambda_min in (levels / px)^2): per bin, how many
+// blocks see the sky (their vectors measure nothing), and of the
+// plane-labelled ones how many are within 2 px of the truth.
+constexpr std::array<double, 9> kTextureEdges = {0, 0.01, 0.03, 0.1, 0.3, 1, 3, 10, 30};
+struct TextureBin {
+  size_t sky = 0;
+  std::vector<float> errors_px;
+};
+using TextureTable = std::array<TextureBin, kTextureEdges.size()>;
+
+void AddTextureFrame(const slapse::GroundTruth& gt, const slapse::FrameRecord& frame,
+                     TextureTable* table) {
+  if (frame.type != slapse::PictureType::kP || frame.mb_texture.empty()) return;
+  const int f = static_cast<int>(frame.index);
+  const int cols = slapse::MbCount(gt.intrinsics.width_px);
+  for (const slapse::MotionVector& mv : frame.mvs) {
+    if (mv.direction != slapse::RefDirection::kPast || frame.prev_anchor_index < 0) continue;
+    const int col = slapse::MbCellOf(mv.x_px), row = slapse::MbCellOf(mv.y_px);
+    const double tex = frame.mb_texture[static_cast<size_t>(row) * cols + col];
+    size_t b = 0;
+    while (b + 1 < kTextureEdges.size() && tex >= kTextureEdges[b + 1]) ++b;
+    const int label = gt.LabelAt(f, mv.x_px, mv.y_px);
+    if (label == slapse::kMbSky) ++(*table)[b].sky;
+    if (label < 0) continue;
+    const Eigen::Vector2d x(mv.x_px, mv.y_px);
+    Eigen::Vector2d x_true;
+    if (!gt.TransferThroughPlane(label, f, static_cast<int>(frame.prev_anchor_index), x, &x_true)) {
+      continue;
+    }
+    const Eigen::Vector2d x_codec(mv.x_px + mv.dx_px, mv.y_px + mv.dy_px);
+    (*table)[b].errors_px.push_back(static_cast<float>((x_codec - x_true).norm()));
+  }
+}
+
+void PrintTextureTable(const TextureTable& t) {
+  std::printf("  %-12s %8s %8s %8s %9s\n", "texture", "sky", "planes", "<= 2 px", "median px");
+  for (size_t b = 0; b < t.size(); ++b) {
+    char range[32];
+    if (b + 1 < t.size()) {
+      std::snprintf(range, sizeof range, "%g-%g", kTextureEdges[b], kTextureEdges[b + 1]);
+    } else {
+      std::snprintf(range, sizeof range, ">= %g", kTextureEdges[b]);
+    }
+    const std::vector<float>& e = t[b].errors_px;
+    std::printf("  %-12s %8zu %8zu %7.1f %% %9.2f\n", range, t[b].sky, e.size(),
+                e.empty() ? 0.0 : 100.0 * WithinTwoPx(e) / e.size(), Median(e));
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  bool merged = false;
+  bool merged = false, texture = false;
   slapse::MergeOptions merge;
   std::vector<std::string> dirs;
   for (int a = 1; a < argc; ++a) {
     const std::string arg = argv[a];
     if (arg == "--merged") {
       merged = true;
+    } else if (arg == "--texture") {
+      texture = true;
     } else if (arg == "--chain-min-frames" && a + 1 < argc) {
       merge.chain_min_frames = std::max(1, std::atoi(argv[++a]));
     } else if (!arg.empty() && arg[0] != '-') {
@@ -186,10 +241,11 @@ int main(int argc, char** argv) {
   }
   if (dirs.empty()) {
     std::fprintf(
-        stderr, "usage: mv_accuracy [--merged [--chain-min-frames N]] DRIVE_DIR [DRIVE_DIR ...]\n");
+        stderr, "usage: mv_accuracy [--merged [--chain-min-frames N] | --texture] DRIVE_DIR [DRIVE_DIR ...]\n");
     return 2;
   }
   Table all{};
+  TextureTable all_texture{};
   for (const std::string& dir : dirs) {
     auto gt = slapse::LoadGroundTruth(dir);
     auto reader = slapse::MvReader::Open(dir + "/drive.ts");
@@ -199,6 +255,7 @@ int main(int argc, char** argv) {
       return 1;
     }
     Table table{};
+    TextureTable texture_table{};
     slapse::SegmentMerger merger((*reader)->info().width_px, (*reader)->info().height_px,
                                  (*reader)->info().mv_sigma_px(), merge);
     slapse::FrameRecord frame;
@@ -208,11 +265,30 @@ int main(int argc, char** argv) {
         continue;
       }
       if (frame.corrupt || frame.index >= static_cast<int64_t>(gt->frames.size())) continue;
+      if (texture) {
+        AddTextureFrame(*gt, frame, &texture_table);
+        continue;
+      }
       AddFrame(*gt, frame, &table);
     }
     std::printf("%s\n", dir.c_str());
+    if (texture) {
+      PrintTextureTable(texture_table);
+      for (size_t b = 0; b < all_texture.size(); ++b) {
+        all_texture[b].sky += texture_table[b].sky;
+        all_texture[b].errors_px.insert(all_texture[b].errors_px.end(),
+                                        texture_table[b].errors_px.begin(),
+                                        texture_table[b].errors_px.end());
+      }
+      continue;
+    }
     PrintTable(table);
     Append(table, &all);
+  }
+  if (texture && dirs.size() > 1) {
+    std::printf("all\n");
+    PrintTextureTable(all_texture);
+    return 0;
   }
   if (dirs.size() > 1) {
     std::printf("all\n");

@@ -2,6 +2,7 @@
 // the weighted start/end merge, and segment assembly from frame records.
 #include "core/merge/mv_merge.h"
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -181,7 +182,7 @@ TEST(MergeTest, WeightedStartEndMergeIsExactForAffineMotion) {
   const Eigen::Vector2d b(-4, 7);
   std::vector<MvCandidate> cands;
   cands.push_back({{100, 100}, a * Eigen::Vector2d(100, 100) + b, true});
-  for (const Eigen::Vector2d s :
+  for (const Eigen::Vector2d& s :
        {Eigen::Vector2d(95, 97), Eigen::Vector2d(104, 103), Eigen::Vector2d(99, 106)}) {
     cands.push_back({s, a * s + b, false});
   }
@@ -211,8 +212,8 @@ TEST(MergeTest, FlowGradientGateKeepsPartitionsOfOneSurfaceAndRejectsMixedCells)
   Eigen::Matrix2d gradient;
   gradient << 0.2, 0.0, 0.0, 0.4;
   std::vector<MvCandidate> partitions;
-  for (const Eigen::Vector2d offset : {Eigen::Vector2d(-4, -4), Eigen::Vector2d(4, -4),
-                                       Eigen::Vector2d(-4, 4), Eigen::Vector2d(4, 4)}) {
+  for (const Eigen::Vector2d& offset : {Eigen::Vector2d(-4, -4), Eigen::Vector2d(4, -4),
+                                        Eigen::Vector2d(-4, 4), Eigen::Vector2d(4, 4)}) {
     const Eigen::Vector2d later = centre + offset;
     partitions.push_back({later, later + d0 + gradient * offset, true});
   }
@@ -329,6 +330,44 @@ TEST(SegmentMergerTest, AssemblesIpPpAndPiSegments) {
     EXPECT_GE(c.n_indirect, 1);
     EXPECT_NEAR((c.x_earlier_px - c.x_later_px).x(), -4 * v, 1e-6);
   }
+}
+
+// The texture gate: cells whose block in the later anchor is flat give no
+// correspondence, whichever candidates (direct or indirect) were filed there;
+// an anchor without textures (a reader told not to compute them) is not gated.
+TEST(SegmentMergerTest, TextureGateDropsFlatCellsOfTheLaterAnchor) {
+  const double v = 0.5;
+  const MergeOptions options;
+  ASSERT_GT(options.min_mb_texture, 0.0);
+  FrameRecord later = Frame(4, PictureType::kP, 0, -1, v);
+  later.mb_texture.assign(16, static_cast<float>(10 * options.min_mb_texture));
+  for (int cell : {0, 5, 15}) {
+    later.mb_texture[cell] = static_cast<float>(0.9 * options.min_mb_texture);
+  }
+  for (const bool textured : {true, false}) {
+    SegmentMerger merger(64, 64, kSigma, options);
+    merger.Push(Frame(0, PictureType::kI, -1, -1, v));
+    for (int b = 1; b <= 3; ++b) merger.Push(Frame(b, PictureType::kB, 0, 4, v));
+    FrameRecord anchor = later;
+    if (!textured) anchor.mb_texture.clear();
+    const auto pair = merger.Push(anchor);
+    ASSERT_TRUE(pair);
+    std::vector<int> cells;
+    for (const Correspondence& c : pair->correspondences) cells.push_back(c.mb_index);
+    EXPECT_EQ(cells.size(), textured ? 13u : 16u);
+    for (int flat : {0, 5, 15}) {
+      EXPECT_EQ(std::count(cells.begin(), cells.end(), flat), textured ? 0 : 1) << flat;
+    }
+  }
+  MergeOptions off = options;
+  off.min_mb_texture = 0.0;  // the gate off: every cell
+  SegmentMerger merger(64, 64, kSigma, off);
+  merger.Push(Frame(0, PictureType::kI, -1, -1, v));
+  FrameRecord p1 = Frame(1, PictureType::kP, 0, -1, v);
+  p1.mb_texture = later.mb_texture;
+  const auto pair = merger.Push(p1);
+  ASSERT_TRUE(pair);
+  EXPECT_EQ(pair->correspondences.size(), 16u);
 }
 
 // ExtendChain refuses a pair whose segment had B frames (its next segment

@@ -232,6 +232,7 @@ std::optional<AnchorPair> SegmentMerger::Push(const FrameRecord& frame) {
   earlier_ = frame;
   earlier_->mvs.clear();
   earlier_->luma.clear();
+  earlier_->mb_texture.clear();
   b_frames_.clear();
   return pair;
 }
@@ -484,7 +485,9 @@ AnchorPair SegmentMerger::Build(const FrameRecord& later) const {
     std::vector<int> at(begin.begin(), begin.end() - 1);
     for (const auto& [cell, candidate] : found) candidates[at[cell]++] = candidate;
   }
+  const bool gate_texture = options_.min_mb_texture > 0 && later.mb_texture.size() == num_cells;
   for (size_t cell = 0; cell < num_cells; ++cell) {
+    if (gate_texture && later.mb_texture[cell] < options_.min_mb_texture) continue;
     const auto merged =
         MergeCell(candidates.data() + begin[cell],
                   static_cast<size_t>(begin[cell + 1] - begin[cell]), sigma_px_, options_);

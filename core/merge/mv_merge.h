@@ -48,6 +48,16 @@ struct MergeOptions {
   // allowance: their later point y + g moves with a wrong g. 0.02 chosen on
   // the tuning drives (docs/TRAJECTORY.md "Session 25").
   double gate_flow_gradient_per_px = 0.02;
+  // Texture gate: a cell whose block in the later anchor has a texture
+  // (FrameRecord::mb_texture, the structure tensor's smaller eigenvalue,
+  // (levels / px)^2) below this gives no correspondence: its content does not
+  // pin the motion down (sky, blank walls, 1-D structure), so every vector
+  // filed there, direct or indirect, is the encoder's guess. Anchors without
+  // mb_texture are not gated; 0 = off. On the tuning drives' P frames, 98 %
+  // of the blocks below 0.03 see the sky, and the plane blocks below it are
+  // within 2 px of the truth 26-65 % of the time against 72-97 % above
+  // 0.1 (bench/mv_accuracy --texture; docs/METHOD.md "MV merging").
+  double min_mb_texture = 0.03;
   bool use_direct = true;
   bool use_indirect = true;
   // IPPP streams (no B frames, one frame between anchors): P-frame vector
