@@ -54,8 +54,8 @@ struct MergeOptions {
   // pin the motion down (sky, blank walls, 1-D structure), so every vector
   // filed there, direct or indirect, is the encoder's guess. Anchors without
   // mb_texture are not gated; 0 = off. On the tuning drives' P frames, 98 %
-  // of the blocks below 0.03 see the sky, and the plane blocks below it are
-  // within 2 px of the truth 26-65 % of the time against 72-97 % above
+  // of the vectors of blocks below 0.03 are in the sky, and those on planes
+  // are within 2 px of the truth 26-65 % of the time against 72-97 % above
   // 0.1 (bench/mv_accuracy --texture; docs/METHOD.md "MV merging").
   double min_mb_texture = 0.03;
   bool use_direct = true;
