@@ -3,6 +3,8 @@
 // seeded by the previous pair's, the plane-at-infinity threshold, extraction),
 // the pipeline's steps carry exactly its planes, and Reset forgets the prior
 // and the tracks.
+#include <cstdio>
+#include <filesystem>
 #include <optional>
 #include <vector>
 
@@ -14,6 +16,8 @@
 #include "core/pipeline/pipeline.h"
 #include "core/planes/infinity.h"
 #include "core/planes/plane_extraction.h"
+#include "lab/codec/video_encoder.h"
+#include "lab/gt/ground_truth.h"
 #include "tests/test_streams.h"
 
 namespace slapse {
@@ -123,6 +127,87 @@ TEST_F(FrontEndTest, ResetForgetsThePriorAndTheTracks) {
 
 // Pipeline::Finish's step is the pair an extended step handed back: counted
 // once, as tracked or not, and no longer as extended.
+// The texture gate on a flat sky (MergeOptions::min_mb_texture,
+// docs/METHOD.md "MV merging"): a 10 fps highway drive at 1242x376 in H.264
+// IPPP (the reporting drive whose first steps went sideways), whose sky is
+// flat. Without the gate the encoder's sky vectors reach the pair motion and
+// the plane extraction (two thirds of the correspondences, four fifths of
+// the plane blocks); with it (the default) the sky gives almost none.
+TEST(FrontEndTextureTest, AFlatSkyGivesNoCorrespondencesAndNoPlane) {
+  SimulateOptions sim;
+  sim.seed = 4002;
+  sim.duration_s = 1.5;
+  sim.fps = 10.0;
+  sim.width_px = 1242;
+  sim.height_px = 376;
+  sim.hfov_deg = 80.7;
+  sim.min_speed_mps = 70 / 3.6;
+  sim.max_speed_mps = 100 / 3.6;
+  sim.scene_kind = SceneKind::kHighway;
+  sim.appearance_variety = true;
+  sim.supersampling = 1;
+  sim.sensor_noise = 0.15;
+  sim.camera_height_min_m = sim.camera_height_max_m = 1.27;
+  sim.pitch_down_min_deg = sim.pitch_down_max_deg = -1.6;
+  auto encoder = EncoderPreset("h264-ippp", sim.fps);
+  ASSERT_TRUE(encoder.ok()) << encoder.status().ToString();
+  sim.encoder = *encoder;
+  auto drive = testing::SimulateTestDrive("texture_sky", sim);
+  ASSERT_TRUE(drive.ok()) << drive.status().ToString();
+  auto gt = LoadGroundTruth(drive->dir);
+  ASSERT_TRUE(gt.ok()) << gt.status().ToString();
+  struct Counts {
+    int correspondences = 0, on_sky = 0, plane_mbs = 0, plane_mbs_on_sky = 0;
+  };
+  auto run = [&](double min_mb_texture) {
+    auto reader = MvReader::Open(drive->video_path);
+    EXPECT_TRUE(reader.ok()) << reader.status().ToString();
+    FrontEndOptions options;
+    options.merge.min_mb_texture = min_mb_texture;
+    FrontEnd front(drive->intrinsics, (*reader)->info().mv_sigma_px(), options);
+    const int cols = MbCount(drive->intrinsics.width_px);
+    auto on_sky = [&](int64_t frame, int mb) {
+      const Eigen::Vector2d c = MbCentreOfCell(mb % cols, mb / cols);
+      return gt->LabelAt(static_cast<int>(frame), c.x(), c.y()) == kMbSky;
+    };
+    Counts n;
+    FrameRecord f;
+    while ((*reader)->Next(&f).ok()) {
+      const auto step = front.Push(f);
+      if (!step.has_value()) continue;
+      for (const Correspondence& c : step->pair.correspondences) {
+        ++n.correspondences;
+        n.on_sky += on_sky(step->pair.later_index, c.mb_index);
+      }
+      if (!step->extraction.ok()) continue;
+      for (const ExtractedPlane& plane : step->extraction->planes) {
+        for (int mb : plane.mb_indices) {
+          ++n.plane_mbs;
+          n.plane_mbs_on_sky += on_sky(step->pair.later_index, mb);
+        }
+      }
+    }
+    std::printf(
+        "min_mb_texture %g: %d correspondences, %d on the sky; %d plane blocks, %d on the sky\n",
+        min_mb_texture, n.correspondences, n.on_sky, n.plane_mbs, n.plane_mbs_on_sky);
+    return n;
+  };
+  const Counts off = run(0.0);
+  const Counts on = run(MergeOptions{}.min_mb_texture);
+  std::filesystem::remove_all(drive->dir);
+  // Without the gate a large share of the correspondences is sky.
+  ASSERT_GT(off.on_sky, off.correspondences / 4) << "the drive no longer shows a flat sky";
+  EXPECT_GT(off.plane_mbs_on_sky, 0) << "without the gate the sky no longer makes planes";
+  EXPECT_LT(on.on_sky, off.on_sky / 10);
+  // Without the gate most plane blocks are sky; with it, at most a few at
+  // the horizon (a block whose centre sees the sky and whose rest the far
+  // scene).
+  EXPECT_GT(off.plane_mbs_on_sky * 2, off.plane_mbs);
+  EXPECT_LT(on.plane_mbs_on_sky * 10, on.plane_mbs);
+  // The gate takes the sky, not the scene.
+  EXPECT_GT(on.correspondences - on.on_sky, (off.correspondences - off.on_sky) * 9 / 10);
+}
+
 TEST(PipelineStepCountsTest, FinishReplacesTheExtendedStep) {
   PipelineStep tracked, extended;
   tracked.tracking = true;
