@@ -291,7 +291,7 @@ bool PlaneExtractor::Rewind() {
   if (!before_.has_value()) return false;
   tracks_ = std::move(before_->tracks);
   down_ = before_->down;
-  vertical_learnt_ = before_->vertical_learnt;
+  vertical_road_blocks_ = before_->vertical_road_blocks;
   last_later_index_ = before_->last_later_index;
   has_previous_ = before_->has_previous;
   last_discovery_s_ = before_->last_discovery_s;
@@ -493,7 +493,8 @@ StatusOr<PlaneExtractionResult> PlaneExtractor::Process(const AnchorPair& pair,
   if (!remaining.ok()) return remaining.status();
   const PairMotion* used_motion = options_.use_motion ? motion : nullptr;
   PairFit fit(pair, options_, used_motion, std::move(*remaining));
-  Memory before{{}, down_, vertical_learnt_, last_later_index_, has_previous_, last_discovery_s_};
+  Memory before{
+      {}, down_, vertical_road_blocks_, last_later_index_, has_previous_, last_discovery_s_};
 
   PlaneExtractionResult result;
   // The street-scene prior's vertical in this pair's later frame: the
@@ -580,8 +581,9 @@ bool PlaneExtractor::OrientationOk(const ExtractedPlane& plane) const {
   if (options_.max_facade_tilt_deg < 0 || options_.max_road_tilt_deg < 0) return true;
   if (!plane.m_later.has_value() || !(plane.m_later->norm() > 0)) return true;
   const double facade_tilt_deg =
-      options_.max_facade_tilt_deg +
-      (vertical_learnt_ ? 0.0 : std::max(0.0, options_.unlearnt_vertical_margin_deg));
+      options_.max_facade_tilt_deg + std::max(0.0, options_.unlearnt_vertical_margin_deg) *
+                                         kVerticalHalfBlocks /
+                                         (kVerticalHalfBlocks + vertical_road_blocks_);
   return std::abs(DownComponent(*plane.m_later, down_)) <= std::sin(DegToRad(facade_tilt_deg)) ||
          IsRoad(plane);
 }
@@ -676,7 +678,8 @@ void PlaneExtractor::DiscoverPlanes(PairFit* fit, PlaneExtractionResult* result,
 }
 
 // The road planes' normals refine the vertical (a running mean, weighted by
-// blocks; a new estimate moves it by at most half).
+// blocks; a new estimate moves it by at most half), and their blocks count
+// as what the vertical has learnt (OrientationOk's margin).
 void PlaneExtractor::LearnVertical(const PlaneExtractionResult& result) {
   Eigen::Vector3d road_sum = Eigen::Vector3d::Zero();
   double road_blocks = 0;
@@ -687,9 +690,9 @@ void PlaneExtractor::LearnVertical(const PlaneExtractionResult& result) {
     road_blocks += static_cast<double>(plane.mb_indices.size());
   }
   if (road_blocks > 0) {
-    const double weight = road_blocks / (road_blocks + 100.0);  // 100 blocks: half way
+    const double weight = road_blocks / (road_blocks + kVerticalHalfBlocks);
     down_ = ((1.0 - weight) * down_ + weight * road_sum.normalized()).normalized();
-    vertical_learnt_ = true;
+    vertical_road_blocks_ += road_blocks;
   }
 }
 

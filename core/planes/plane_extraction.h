@@ -164,10 +164,16 @@ struct PlaneExtractionOptions {
   // 2.84 % at 8 deg, 2.65 % at 5 deg.
   double max_facade_tilt_deg = 5.0;
   double max_road_tilt_deg = 15.0;
-  // Until a road plane has taught the vertical, the camera's y axis stands
+  // Until road planes have taught the vertical, the camera's y axis stands
   // in for it, and a camera pitched or rolled by a few degrees tilts every
-  // wall by as much: the facade tolerance is widened by this margin until
-  // then.
+  // wall by as much: the facade tolerance is widened by this margin, which
+  // shrinks as road blocks teach the vertical (to a half after 100 of them,
+  // the blocks that move the vertical half way; see LearnVertical). A
+  // single small road patch moves the vertical a fifth of the way and must
+  // not drop the whole margin: on a 3.9 deg pitched camera at an
+  // intersection (reporting intersection-6, MPEG-2) the walls then looked
+  // 6-7 deg tilted, every plane of a pair was refused and the filter lost
+  // its scale (docs/TRAJECTORY.md, session 27).
   double unlearnt_vertical_margin_deg = 3.0;
   // Boundary trim (beyond the paper): after the refits, blocks on the border
   // of the kept set (an 8-neighbour cell inside the grid not in the set) whose
@@ -302,11 +308,15 @@ class PlaneExtractor {
   bool IsRoad(const ExtractedPlane& plane) const;         // m_later set and non-zero
   bool OrientationOk(const ExtractedPlane& plane) const;  // the street-scene prior
 
+  // Road blocks that move the vertical half way to their normals, and that
+  // halve the unlearnt-vertical margin (LearnVertical, OrientationOk).
+  static constexpr double kVerticalHalfBlocks = 100.0;
+
   // What Process remembers between pairs, before the last call (Rewind).
   struct Memory {
     std::vector<Track> tracks;
     Eigen::Vector3d down;
-    bool vertical_learnt;
+    double vertical_road_blocks;
     int64_t last_later_index;
     bool has_previous;
     double last_discovery_s;
@@ -318,7 +328,7 @@ class PlaneExtractor {
   // The vertical (unit, pointing down) in the camera frame of the last later
   // anchor: the street-scene prior's reference.
   Eigen::Vector3d down_ = Eigen::Vector3d::UnitY();
-  bool vertical_learnt_ = false;  // down_ has been refined by a road plane
+  double vertical_road_blocks_ = 0.0;  // road blocks that have refined down_ (LearnVertical)
   int64_t last_later_index_ = -1;
   bool has_previous_ = false;
   double last_discovery_s_ = -1.0;  // later anchor's timestamp of the last discovery (-1: none)
