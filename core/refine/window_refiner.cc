@@ -121,6 +121,27 @@ struct RoadAttitudeResidual {
   double inv_sigma;
 };
 
+// Gauge (f): camera i's centre c_i (world) lies in the plane through the
+// oldest camera parallel to the road,
+//   h_i = pi_r^T R_wr^T (c_i - c_wr) = 0
+// (its height change relative to the road's distance; pi_r the road in the
+// oldest camera, (R_wr, c_wr) that camera's world_from_cam, constant during
+// a solve), r = h_i / sigma.
+struct RoadLevelResidual {
+  RoadLevelResidual(const Eigen::Matrix3d& R_wr, const Eigen::Vector3d& c_wr, double sigma)
+      : R_rw(R_wr.transpose()), c_wr(c_wr), inv_sigma(1.0 / sigma) {}
+  template <typename T>
+  bool operator()(const T* c_i, const T* pi_r, T* residual) const {
+    const Eigen::Map<const Vec3<T>> c(c_i);
+    const Eigen::Map<const Vec3<T>> pi(pi_r);
+    residual[0] = pi.dot(R_rw.cast<T>() * (c - c_wr.cast<T>())) * T(inv_sigma);
+    return true;
+  }
+  Eigen::Matrix3d R_rw;
+  Eigen::Vector3d c_wr;
+  double inv_sigma;
+};
+
 // Poses as parameter blocks: Eigen quaternion (x, y, z, w) and centre.
 struct PoseBlock {
   Eigen::Quaterniond q;
@@ -133,13 +154,14 @@ Status WindowRefinerOptions::Check(const std::string& who) const {
   if (window_anchors < 3 || max_iterations < 1 || max_mbs_per_plane < 4 || !(extra_sigma_px > 0) ||
       !(huber_k > 0) || !(gauge_step_rel_sigma > 0) || !(road_height_rel_sigma > 0) ||
       !(speed_change_rel_per_sqrt_s > 0) || !(angular_rate_change_rad_s_per_sqrt_s > 0) ||
-      !(road_attitude_sigma_deg >= 0) || road_reference_solves < 1 ||
-      !(reassociate_max_angle_deg > 0) || !(reassociate_max_distance_ratio > 1) ||
-      !(max_final_rms > 0)) {
+      !(road_attitude_sigma_deg >= 0) || !(road_level_rel_sigma >= 0) ||
+      road_reference_solves < 1 || !(reassociate_max_angle_deg > 0) ||
+      !(reassociate_max_distance_ratio > 1) || !(max_final_rms > 0)) {
     return InvalidArgumentError(who +
                                 ": window_anchors must be >= 3, max_iterations >= 1, "
                                 "max_mbs_per_plane >= 4, road_reference_solves >= 1, every sigma "
-                                "> 0 (road_attitude_sigma_deg >= 0), reassociate_max_angle_deg "
+                                "> 0 (road_attitude_sigma_deg, road_level_rel_sigma >= 0), "
+                                "reassociate_max_angle_deg "
                                 "and max_final_rms > 0, reassociate_max_distance_ratio > 1");
   }
   return Status::Ok();
@@ -400,7 +422,8 @@ void WindowRefiner::AddGaugeAndPriors(Problem* problem, size_t first, WindowRefi
                new StepLengthResidual(c0, length, options_.gauge_step_rel_sigma)),
            {wp.poses[first + 1].c.data()});
   }
-  // (c) the road's height, once it took part in a solve (or is metric), and
+  // (c) the road's height, once it took part in a solve (or is metric), (f)
+  // the cameras' level above it, and
   // (e) its attitude, once the references are taken (AccumulateRoadReferences:
   // only with (e) on; the height held alone made the MPEG-2 tuning drives
   // worse, docs/METHOD.md "The road's attitude").
@@ -410,6 +433,15 @@ void WindowRefiner::AddGaugeAndPriors(Problem* problem, size_t first, WindowRefi
     wp.Add(new ceres::AutoDiffCostFunction<RoadHeightResidual, 1, 3>(new RoadHeightResidual(
                road_height_.value_or(1.0 / road->second.norm()), options_.road_height_rel_sigma)),
            {road->second.data()});
+    if (options_.road_level_rel_sigma > 0) {
+      const Rigid3d& world_from_r = anchors_[0].world_from_cam;
+      for (size_t k = 1; k < anchors_.size(); ++k) {
+        wp.Add(new ceres::AutoDiffCostFunction<RoadLevelResidual, 1, 3, 3>(new RoadLevelResidual(
+                   world_from_r.R(), world_from_r.translation,
+                   options_.road_level_rel_sigma * std::sqrt(static_cast<double>(k)))),
+               {wp.poses[first + k].c.data(), road->second.data()});
+      }
+    }
     if (road_normal_cam_) {
       const Eigen::Matrix3d R_wr = anchors_[0].world_from_cam.R();
       const double sigma_rad = DegToRad(options_.road_attitude_sigma_deg);

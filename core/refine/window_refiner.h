@@ -48,7 +48,14 @@
 //      Without it, short baselines (one-frame H.264 IPPP pairs) let the
 //      cameras' pitch relative to the road drift by degrees over seconds, and
 //      a tilted road changes every road block's depth, hence the step lengths
-//      (docs/METHOD.md "The road's attitude").
+//      (docs/METHOD.md "The road's attitude");
+//  (f) the road's level: the car keeps its height above the road, so each
+//      camera of the window lies in the plane through the oldest camera
+//      parallel to the road, to road_level_rel_sigma of the road's distance
+//      per step (a random walk: sqrt(k) of it k steps on), as the filter's
+//      road_height_rel_sigma pseudo-measurement holds each step. It ties the
+//      road's attitude to the direction of travel, which the whole image
+//      measures (docs/METHOD.md "The road's level in the window").
 // The references of (c) and (e) belong to the trajectory, not the window:
 // Reset keeps them, Rescale scales the height.
 // Cost: Levenberg-Marquardt (core/refine/block_lm.h: Ceres' steps, the
@@ -85,6 +92,12 @@ struct WindowRefinerOptions {
   // (e): road normal per camera, deg per axis; 0 = off (then (c) is at each
   // solve's previous estimate and nothing is held).
   double road_attitude_sigma_deg = 1.0;
+  // (f): each camera's height change above the road, relative to the road's
+  // distance, per step from the oldest camera; 0 = off. 0.01 as the
+  // filter's EkfOptions::road_height_rel_sigma (1.5 cm per step at 1.5 m:
+  // bumps, suspension). The simulator's cameras never leave their height,
+  // so a tighter value measured better there (0.003) and is not taken.
+  double road_level_rel_sigma = 0.01;
   // (c) and (e)'s references: the mean road over this many solves of a full
   // window in which at least half the pairs saw the road (>= 1). One solve
   // of a short-baseline window is off by a degree or two; 8 (0.27 s of
@@ -114,7 +127,8 @@ struct WindowRefinerOptions {
 
   // InvalidArgument (prefixed with `who`) unless window_anchors >= 3,
   // max_iterations >= 1, max_mbs_per_plane >= 4, road_reference_solves >= 1,
-  // every sigma (but road_attitude_sigma_deg, >= 0), the angle and
+  // every sigma (but road_attitude_sigma_deg and road_level_rel_sigma,
+  // >= 0), the angle and
   // max_final_rms are > 0 and the distance ratio > 1.
   Status Check(const std::string& who = "WindowRefinerOptions") const;
 };
