@@ -6,9 +6,11 @@
 #include <gtest/gtest.h>
 
 #include "core/common/so3.h"
+#include "core/mv/mv_reader.h"
 #include "lab/eval/extraction_eval.h"
 #include "lab/eval/plane_eval.h"
 #include "lab/eval/trajectory_eval.h"
+#include "lab/eval/true_vectors.h"
 #include "lab/sim/simulate.h"
 #include "tests/test_streams.h"
 
@@ -107,6 +109,97 @@ TEST(EvalTest, TrueHomographyMapsSimulatedPlanePointsAndTheDriveScores) {
   EXPECT_GT(stats->visible_kept, 0);
   EXPECT_LE(stats->visible_kept, stats->visible);
   EXPECT_LE(stats->found_kept, stats->found);
+}
+
+// True vectors (lab/eval/true_vectors.h): the vectors of blocks on one plane
+// get their block centre's true displacement, with the noise asked for; every
+// other vector and the records stay as decoded.
+TEST(EvalTest, TrueVectorsReplaceThePlaneBlocksVectorsAndNothingElse) {
+  auto drive =
+      testing::SimulateTestDrive("eval_true_vectors", testing::SmallMpeg2DriveOptions(6, 1.0));
+  ASSERT_TRUE(drive.ok()) << drive.status().ToString();
+  auto gt = LoadGroundTruth(drive->dir);
+  ASSERT_TRUE(gt.ok()) << gt.status().ToString();
+  auto reader = MvReader::Open(drive->video_path);
+  ASSERT_TRUE(reader.ok()) << reader.status().ToString();
+  std::vector<FrameRecord> codec;
+  FrameRecord f;
+  while ((*reader)->Next(&f).ok()) codec.push_back(f);
+  ASSERT_GT(codec.size(), 20u);
+
+  // The truth of a vector, or false where the replacement must keep it.
+  auto truth = [&](const FrameRecord& fr, const MotionVector& mv, Eigen::Vector2d* d) {
+    const int64_t ref =
+        mv.direction == RefDirection::kPast ? fr.prev_anchor_index : fr.next_anchor_index;
+    const int label = gt->LabelAt(static_cast<int>(fr.index), mv.x_px, mv.y_px);
+    Eigen::Vector2d x_ref;
+    if (ref < 0 || label < 0 ||
+        !gt->TransferThroughPlane(label, static_cast<int>(fr.index), static_cast<int>(ref),
+                                  Eigen::Vector2d(mv.x_px, mv.y_px), &x_ref)) {
+      return false;
+    }
+    *d = x_ref - Eigen::Vector2d(mv.x_px, mv.y_px);
+    return true;
+  };
+  // Replaced with `noise_px`: the residuals to the truth of the replaced
+  // vectors (per axis), and the codec's of the same vectors.
+  auto replace = [&](double noise_px, std::vector<double>* after, std::vector<double>* before) {
+    std::vector<FrameRecord> frames = codec;
+    TrueVectorOptions options;
+    options.noise_px = noise_px;
+    TrueVectorReport report;
+    ASSERT_TRUE(ReplaceWithTrueVectors(*gt, options, &frames, &report).ok());
+    int64_t replaced = 0, kept = 0;
+    for (size_t i = 0; i < frames.size(); ++i) {
+      ASSERT_EQ(frames[i].mvs.size(), codec[i].mvs.size());
+      EXPECT_EQ(frames[i].type, codec[i].type);
+      for (size_t k = 0; k < frames[i].mvs.size(); ++k) {
+        const MotionVector &a = frames[i].mvs[k], &c = codec[i].mvs[k];
+        EXPECT_EQ(a.x_px, c.x_px);
+        Eigen::Vector2d d;
+        if (!truth(frames[i], a, &d)) {
+          EXPECT_EQ(a.dx_px, c.dx_px);
+          EXPECT_EQ(a.dy_px, c.dy_px);
+          ++kept;
+          continue;
+        }
+        ++replaced;
+        after->push_back(a.dx_px - d.x());
+        after->push_back(a.dy_px - d.y());
+        before->push_back(c.dx_px - d.x());
+        before->push_back(c.dy_px - d.y());
+      }
+    }
+    EXPECT_EQ(report.replaced, replaced);
+    EXPECT_EQ(report.kept, kept);
+    EXPECT_GT(replaced, 5000);
+    EXPECT_GT(kept, 100);  // sky and mixed blocks
+  };
+  auto rms = [](const std::vector<double>& v) {
+    double s = 0;
+    for (double x : v) s += x * x;
+    return std::sqrt(s / v.size());
+  };
+  std::vector<double> exact, codec_error, noisy, unused;
+  replace(0.0, &exact, &codec_error);
+  for (double e : exact) ASSERT_LT(std::abs(e), 1e-3);  // float rounding only
+  EXPECT_GT(rms(codec_error), 0.2);                     // the codec's are not the truth
+  replace(0.5, &noisy, &unused);
+  double mean = 0;
+  for (double e : noisy) mean += e / noisy.size();
+  EXPECT_NEAR(rms(noisy), 0.5, 0.02);  // > 10^4 draws: the rms is within 1 %
+  EXPECT_NEAR(mean, 0.0, 0.02);
+
+  // Broken contracts are errors.
+  std::vector<FrameRecord> frames = codec;
+  TrueVectorReport report;
+  TrueVectorOptions bad;
+  bad.noise_px = -1;
+  EXPECT_EQ(ReplaceWithTrueVectors(*gt, bad, &frames, &report).code(),
+            StatusCode::kInvalidArgument);
+  frames.back().index = static_cast<int64_t>(gt->frames.size());
+  EXPECT_EQ(ReplaceWithTrueVectors(*gt, TrueVectorOptions{}, &frames, &report).code(),
+            StatusCode::kInvalidArgument);
 }
 
 // The seam of two flush facades is labelled mixed (no plane covers 90 % of

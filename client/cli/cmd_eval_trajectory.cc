@@ -106,6 +106,20 @@ int RunEvalTrajectory(int argc, char** argv) {
       ->type_name("DEG")
       ->check(CLI::Range(0.0, api::kMaxRoadAttitudeSigmaDeg))
       ->capture_default_str();
+  app.add_option("--refine-extra-sigma-px", eo.pipeline.refine.extra_sigma_px,
+                 "added in quadrature to each vector's variance in the refinement "
+                 "(WindowRefinerOptions::extra_sigma_px)")
+      ->type_name("PX")
+      ->check(CLI::Range(0.0, 100.0))
+      ->capture_default_str();
+  // The method without the codec's errors (lab/eval/true_vectors.h).
+  app.add_flag("--true-vectors", eo.true_vectors,
+               "replace the codec's vectors of blocks on one plane by their true displacement");
+  app.add_option("--true-vector-noise-px", eo.true_vector.noise_px,
+                 "with --true-vectors: Gaussian noise added per axis")
+      ->type_name("PX")
+      ->check(CLI::Range(0.0, 100.0))
+      ->capture_default_str();
   if (int rc = cl.Parse(argc, argv); rc >= 0) return rc;
   if (!cl.positional().empty()) {
     return Fail("eval-trajectory", "unexpected argument '" + cl.positional()[0] + "'", 2);
@@ -153,7 +167,15 @@ int RunEvalTrajectory(int argc, char** argv) {
 
   const std::string dir = eo.out_dir + "/" + eo.profile;
   std::filesystem::create_directories(dir);
-  const std::string md = DriveResultsMarkdown(results, eo.profile);
+  std::string md = DriveResultsMarkdown(results, eo.profile);
+  if (eo.true_vectors) {  // never mistaken for a table of the codec's vectors
+    char note[200];
+    std::snprintf(note, sizeof note,
+                  "**True vectors** (--true-vectors, noise %.2f px per axis): the codec's "
+                  "vectors of blocks on one plane were replaced by their true displacement.\n\n",
+                  eo.true_vector.noise_px);
+    md = note + md;
+  }
   for (const Status& s : {WriteText(dir + "/trajectory_eval.md", md),
                           WriteText(dir + "/trajectory_eval.csv", DriveResultsCsv(results))}) {
     if (!s.ok()) return Fail("eval-trajectory", s.ToString());

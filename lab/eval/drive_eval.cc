@@ -19,6 +19,7 @@ namespace slapse {
 
 Status DriveEvalOptions::Check() const {
   if (out_dir.empty()) return InvalidArgumentError("drive evaluation needs an output directory");
+  if (true_vectors) SLAPSE_RETURN_IF_ERROR(true_vector.Check());
   return EncoderProfile(profile).status();
 }
 
@@ -129,6 +130,10 @@ StatusOr<DriveResult> EvaluateDrive(const DriveSpec& spec, const DriveEvalOption
   Status end;
   while ((end = (*reader)->Next(&f)).ok()) frames.push_back(f);
   if (end.code() != StatusCode::kOutOfRange) return end;
+  if (options.true_vectors) {
+    TrueVectorReport replaced;
+    SLAPSE_RETURN_IF_ERROR(ReplaceWithTrueVectors(*gt, options.true_vector, &frames, &replaced));
+  }
   const double sigma = (*reader)->info().mv_sigma_px();
   const std::vector<TimedPose> truth = TruthPoses(*gt);
   r.frames = static_cast<int>(frames.size());

@@ -17,6 +17,7 @@
 #include "core/common/status.h"
 #include "core/pipeline/pipeline.h"
 #include "lab/eval/drive_table.h"
+#include "lab/eval/true_vectors.h"
 
 namespace slapse {
 
@@ -25,6 +26,10 @@ struct DriveEvalOptions {
   std::string profile = "mpeg2-ibbbp";          // EncoderProfile
   bool reuse = true;                            // keep a drive already simulated
   PipelineOptions pipeline;                     // the scale source is set per run
+  // Run on true vectors instead of the codec's (lab/eval/true_vectors.h):
+  // the method's own error, without the codec's. Off by default.
+  bool true_vectors = false;
+  TrueVectorOptions true_vector;
   Status Check() const;
 };
 
