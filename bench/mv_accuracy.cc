@@ -18,6 +18,10 @@
 // P fields with N > 1) are compared instead: each correspondence's earlier
 // point against the later MB centre's point transferred through its plane
 // into the earlier anchor; the flow bins are then the pair's true flow.
+// With --span N, only the vectors whose reference is N frames from their own
+// frame: a B frame's one-frame vectors against an IBBBP P frame's four-frame
+// ones, where the codec's search stops following the near road
+// (docs/TRAJECTORY.md "Session 28").
 // With --texture, the anchor P frames' vectors by their block's texture
 // (the merge's texture gate, MergeOptions::min_mb_texture): sky blocks and
 // plane blocks per bin, and how right the plane blocks' vectors are.
@@ -151,13 +155,16 @@ void AddPair(const slapse::GroundTruth& gt, const slapse::AnchorPair& pair, Tabl
   }
 }
 
-// Adds one frame's plane-labelled vectors to the table.
-void AddFrame(const slapse::GroundTruth& gt, const slapse::FrameRecord& frame, Table* table) {
+// Adds one frame's plane-labelled vectors to the table (span > 0: only those
+// whose reference is `span` frames away).
+void AddFrame(const slapse::GroundTruth& gt, const slapse::FrameRecord& frame, int span,
+              Table* table) {
   const int f = static_cast<int>(frame.index);
   for (const slapse::MotionVector& mv : frame.mvs) {
     const int64_t ref = mv.direction == slapse::RefDirection::kPast ? frame.prev_anchor_index
                                                                     : frame.next_anchor_index;
     if (ref < 0 || ref >= static_cast<int64_t>(gt.frames.size())) continue;
+    if (span > 0 && std::llabs(ref - frame.index) != span) continue;
     const int label = gt.LabelAt(f, mv.x_px, mv.y_px);
     if (label < 0) continue;
     const Eigen::Vector2d x(mv.x_px, mv.y_px);
@@ -222,12 +229,15 @@ void PrintTextureTable(const TextureTable& t) {
 
 int main(int argc, char** argv) {
   bool merged = false, texture = false;
+  int span = 0;
   slapse::MergeOptions merge;
   std::vector<std::string> dirs;
   for (int a = 1; a < argc; ++a) {
     const std::string arg = argv[a];
     if (arg == "--merged") {
       merged = true;
+    } else if (arg == "--span" && a + 1 < argc) {
+      span = std::max(1, std::atoi(argv[++a]));
     } else if (arg == "--texture") {
       texture = true;
     } else if (arg == "--chain-min-frames" && a + 1 < argc) {
@@ -241,7 +251,9 @@ int main(int argc, char** argv) {
   }
   if (dirs.empty()) {
     std::fprintf(
-        stderr, "usage: mv_accuracy [--merged [--chain-min-frames N] | --texture] DRIVE_DIR [DRIVE_DIR ...]\n");
+        stderr,
+        "usage: mv_accuracy [--merged [--chain-min-frames N] | --texture | --span N] DRIVE_DIR "
+        "[DRIVE_DIR ...]\n");
     return 2;
   }
   Table all{};
@@ -269,7 +281,7 @@ int main(int argc, char** argv) {
         AddTextureFrame(*gt, frame, &texture_table);
         continue;
       }
-      AddFrame(*gt, frame, &table);
+      AddFrame(*gt, frame, span, &table);
     }
     std::printf("%s\n", dir.c_str());
     if (texture) {
