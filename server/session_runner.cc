@@ -387,6 +387,7 @@ void SessionRunner::ApplyUpdatesLocked(const StepUpdates& u, std::vector<v1::Ses
   pu->set_tracking(u.pose.tracking);
   pu->set_metric(u.pose.metric);
   pu->set_note(u.pose.note);
+  pu->set_scale_note(u.pose.scale_note);
   pu->set_extended(u.pose.extended);
   if (u.pose.tracking) *pu->mutable_quality() = api::PoseQualityToProto(u.pose.quality);
   for (const FramePose& p : u.frame_poses) *pu->add_frame_poses() = api::FramePoseToProto(p);

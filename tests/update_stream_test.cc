@@ -10,13 +10,16 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <map>
 #include <set>
 #include <vector>
 
+#include "core/common/road.h"
 #include "core/mv/mv_reader.h"
 #include "core/pipeline/pipeline.h"
 #include "core/pipeline/update_stream.h"
+#include "lab/gt/ground_truth.h"
 #include "tests/test_streams.h"
 
 namespace slapse {
@@ -40,6 +43,7 @@ void CheckAndApply(const Pipeline& pipeline, const PipelineStep& step, const Ste
   EXPECT_EQ(u.pose.tracking, step.tracking);
   EXPECT_EQ(u.pose.metric, step.metric);
   EXPECT_EQ(u.pose.note, step.note);
+  EXPECT_EQ(u.pose.scale_note, step.scale_note);
   EXPECT_EQ(u.pose.world_from_cam.translation, step.world_from_cam.translation);
 
   std::set<int> now;
@@ -289,6 +293,53 @@ TEST_F(UpdateStreamTest, NothingIsForgottenWhileTheScaleMayChange) {
   Run(o, &rescales, 0, nullptr, /*keep_final=*/4, &forgotten);
   EXPECT_LE(rescales, 1);
   EXPECT_GT(forgotten, 20u);
+}
+
+// The step that fixes the camera-height scale says how steeply the image saw
+// the road (core/common/road.h SteepestRoadDepressionDeg of the window's
+// road), and the pose update carries that note; the angle is the truth's
+// within a degree and a half (the window's road attitude), and the note
+// calls the scale weak exactly below ScaleOptions::kMinRoadDepressionDeg.
+TEST_F(UpdateStreamTest, TheHeightFixSaysHowSteeplyTheRoadWasSeen) {
+  ASSERT_NE(drive_, nullptr);
+  auto gt = LoadGroundTruth(drive_->dir);
+  ASSERT_TRUE(gt.ok()) << gt.status().ToString();
+  auto reader = MvReader::Open(drive_->video_path);
+  ASSERT_TRUE(reader.ok()) << reader.status().ToString();
+  const StreamInfo& info = (*reader)->info();
+  Intrinsics k = drive_->intrinsics;
+  k.width_px = info.width_px;
+  k.height_px = info.height_px;
+  PipelineOptions o;
+  o.scale.source = ScaleOptions::Source::kCameraHeight;
+  o.scale.camera_height_m = gt->frames[0].world_from_cam.translation.z();
+  Pipeline pipeline(k, info.mv_sigma_px(), o);
+  UpdateStream stream;
+  FrameRecord frame;
+  std::string fix_note;
+  int64_t fix_index = -1;
+  while ((*reader)->Next(&frame).ok()) {
+    auto step = pipeline.Push(frame);
+    ASSERT_TRUE(step.ok()) << step.status().ToString();
+    if (!step->has_value() || fix_index >= 0 || !pipeline.metric()) continue;
+    fix_index = (*step)->later_index;
+    fix_note = stream.Next(pipeline, **step).pose.scale_note;
+  }
+  ASSERT_GE(fix_index, 0) << "the camera height never fixed the scale";
+  ASSERT_TRUE(pipeline.height_road_depression_deg().has_value());
+  const double seen_deg = *pipeline.height_road_depression_deg();
+  // The truth: the world's down (road at z = 0) in the fixing camera.
+  const Eigen::Vector3d down_cam =
+      gt->frames[fix_index].world_from_cam.R().transpose() * Eigen::Vector3d(0, 0, -1);
+  const double truth_deg = SteepestRoadDepressionDeg(down_cam, k);
+  std::printf("height fixed at anchor %lld: road seen down to %.2f deg (truth %.2f)\n",
+              static_cast<long long>(fix_index), seen_deg, truth_deg);
+  EXPECT_NEAR(seen_deg, truth_deg, 1.5);
+  EXPECT_EQ(fix_note.rfind("metric: camera height", 0), 0u) << fix_note;
+  EXPECT_NE(fix_note.find("below its horizon"), std::string::npos) << fix_note;
+  EXPECT_EQ(fix_note.find("weak") != std::string::npos,
+            seen_deg < ScaleOptions::kMinRoadDepressionDeg)
+      << fix_note;
 }
 
 // A loss (the stream breaks off and 12 frames never arrive): the trajectory

@@ -578,6 +578,7 @@ int RunWatch(int argc, char** argv) {
     return Fail("watch", s.message(), 2);
   }
   auto client = Connect(server);
+  std::string last_scale_note;
   Status s = client->Watch(
       cl.positional()[0], static_cast<uint64_t>(after), [&](const v1::SessionEvent& e) {
         if (json) {
@@ -592,6 +593,11 @@ int RunWatch(int argc, char** argv) {
               static_cast<long long>(p.anchor_index()), p.timestamp_s(),
               p.tracking() ? "tracking" : "waiting ", t.tx(), t.ty(), t.tz(), t.qx(), t.qy(),
               t.qz(), t.qw(), p.note().empty() ? "" : "  ", p.note().c_str());
+          // The scale's state when it changes (it repeats while not observable yet).
+          if (!p.scale_note().empty() && p.scale_note() != last_scale_note) {
+            std::printf("       scale  %s\n", p.scale_note().c_str());
+            last_scale_note = p.scale_note();
+          }
         } else if (e.has_plane()) {
           const v1::PlaneEvent& p = e.plane();
           std::printf("%6llu plane  %-8s track %-4d n = (%.3f, %.3f, %.3f)  d = %.3f\n",

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <set>
 #include <utility>
@@ -168,7 +169,7 @@ PipelineStep Pipeline::Process(const FrontEndStep& front) {
       if (options_.window_refine) {
         MaybeFixScaleFromWindowRoad(&step);
       } else {
-        MaybeFixScaleFromRoad();
+        MaybeFixScaleFromRoad(&step);
       }
       const double deadline_s = options_.scale.road_deadline_s;
       if (!metric_ && deadline_s > 0 && pair.later_timestamp_s - first_pose_s_ > deadline_s) {
@@ -310,7 +311,7 @@ void Pipeline::RecordPlanes(const PipelineStep& step, const AnchorPair& pair) {
   }
 }
 
-void Pipeline::MaybeFixScaleFromRoad() {
+void Pipeline::MaybeFixScaleFromRoad(PipelineStep* step) {
   const ScaleOptions& sc = options_.scale;
   for (const PlaneTrack& track : ekf_.planes()) {
     // A coasting road's pi was observed at an older scale and only predicted
@@ -320,6 +321,7 @@ void Pipeline::MaybeFixScaleFromRoad() {
     if (!IsRoadLike(track.pi, CameraDown(), sc.road_max_angle_deg)) continue;
     ApplyScale(sc.camera_height_m * track.pi.norm());
     metric_ = true;
+    NoteHeightFix(track.pi, "camera height over the filter's road plane", step);
     return;
   }
 }
@@ -460,8 +462,30 @@ void Pipeline::MaybeFixScaleFromWindowRoad(PipelineStep* step) {
   ApplyScale(sc.camera_height_m / r.road_distance);
   refiner_.SetRoadHeight(sc.camera_height_m);
   metric_ = true;
-  step->scale_note = "metric: camera height over the road seen in " + std::to_string(r.road_pairs) +
-                     " window pairs";
+  const std::optional<Eigen::Vector3d> road = refiner_.RoadInNewest();
+  NoteHeightFix(
+      road.value_or(Eigen::Vector3d::Zero()),
+      "camera height over the road seen in " + std::to_string(r.road_pairs) + " window pairs",
+      step);
+}
+
+void Pipeline::NoteHeightFix(const Eigen::Vector3d& road_pi_cam, const std::string& how,
+                             PipelineStep* step) {
+  const double steepest_deg = SteepestRoadDepressionDeg(road_pi_cam, intrinsics_);
+  height_road_depression_deg_ = steepest_deg;
+  char seen[160];
+  std::snprintf(seen, sizeof seen, "; the image sees the road at most %.1f deg below its horizon",
+                steepest_deg);
+  step->scale_note = "metric: " + how + seen;
+  if (!(steepest_deg >= ScaleOptions::kMinRoadDepressionDeg)) {
+    char weak[240];
+    std::snprintf(weak, sizeof weak,
+                  " -- weak: below %.0f deg (a short vertical field of view, or the camera "
+                  "pitched up) the height places the scale only to several %% "
+                  "(docs/TRAJECTORY.md \"Session 28\")",
+                  ScaleOptions::kMinRoadDepressionDeg);
+    step->scale_note += weak;
+  }
 }
 
 Status Pipeline::RevisePose(size_t n, const Rigid3d& world_from_cam) {

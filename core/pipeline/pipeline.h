@@ -56,6 +56,17 @@ struct ScaleOptions {
   // step's scale_note says so) and the scale can no longer change, so a long
   // run can forget its final results (Pipeline::ForgetFinal). 0: no deadline.
   double road_deadline_s = 60.0;
+  // kCameraHeight: the road places the height well only when the camera sees
+  // it steeply enough: the fix reports the steepest ray of the image to the
+  // road, as its angle below the road's horizon (core/common/road.h
+  // SteepestRoadDepressionDeg; Pipeline::height_road_depression_deg), and
+  // calls the metric scale weak below this. Not an option: a fact of the
+  // measurements, chosen on the tuning drives (8 of their 15 runs below it
+  // beyond 3 %, 11 of 69 above). On all 161 metric runs of both profiles
+  // and splits: beyond 3 % on 19 of the 31 runs below 18 deg (1242x376
+  // frames, 30 deg of vertical field, the camera level or pitched up), on
+  // 22 of the 130 above (docs/TRAJECTORY.md "Session 28").
+  static constexpr double kMinRoadDepressionDeg = 18.0;
 };
 
 // The front end's options (merge, infinity, extraction) and the filter's.
@@ -238,6 +249,10 @@ class Pipeline {
   // Every plane the filter ever held, by track id (those not forgotten).
   const std::map<int, MapPlane>& plane_map() const { return plane_map_; }
   bool metric() const { return metric_; }
+  // kCameraHeight, once metric: the steepest ray of the image to the road
+  // the scale was fixed from, degrees below the road's horizon
+  // (ScaleOptions::kMinRoadDepressionDeg); nullopt before (or for another source).
+  std::optional<double> height_road_depression_deg() const { return height_road_depression_deg_; }
   // How many of the tracked anchor steps a plane observation measured
   // (ScaleSupport), over the whole run.
   const ScaleSupport& scale_support() const { return scale_support_; }
@@ -282,7 +297,12 @@ class Pipeline {
   void RestartOnNonFinite(const Rigid3d& world_from_cam_before, PipelineStep* step);
   void RecordPlanes(const PipelineStep& step, const AnchorPair& pair);
   void ApplyScale(double s);
-  void MaybeFixScaleFromRoad();
+  void MaybeFixScaleFromRoad(PipelineStep* step);
+  // kCameraHeight, the scale just fixed from the road `road_pi_cam` (the
+  // newest camera's): records how steeply the image saw it and says so in
+  // the step's scale_note, after `how` ("camera height over ...").
+  void NoteHeightFix(const Eigen::Vector3d& road_pi_cam, const std::string& how,
+                     PipelineStep* step);
   // Appends the step's all-frames poses (the frames between its anchors, the
   // later anchor, and the earlier one where the trajectory (re)starts).
   void AddFramePoses(const AnchorPair& pair, PipelineStep* step);
@@ -304,6 +324,7 @@ class Pipeline {
   bool finishing_ = false;                   // in Finish: no more extensions
   Rigid3d world_from_cam_;
   bool metric_ = false;
+  std::optional<double> height_road_depression_deg_;
   std::vector<TimedPose> trajectory_;
   ScaleSupport scale_support_;
   std::map<int, MapPlane> plane_map_;

@@ -42,6 +42,7 @@ StepUpdates UpdateStream::Next(const Pipeline& pipeline, const PipelineStep& ste
   out.pose.tracking = step.tracking;
   out.pose.metric = step.metric;
   out.pose.note = step.note;
+  out.pose.scale_note = step.scale_note;
   out.pose.extended = step.extended;
   if (step.tracking && !step.frame_poses.empty())
     out.pose.quality = step.frame_poses.back().quality;

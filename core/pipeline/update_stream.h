@@ -38,11 +38,12 @@ struct PoseChange {
   int64_t anchor_index = -1;  // display index of the later anchor
   double timestamp_s = 0.0;   // of the later anchor
   Rigid3d world_from_cam;
-  bool tracking = false;  // the filter is running (pose and planes valid)
-  bool metric = false;    // lengths are metres
-  std::string note;       // why the step did not track, if it did not
-  bool extended = false;  // PipelineStep::extended: its poses come with a later step
-  PoseQuality quality;    // the anchor's, when tracking
+  bool tracking = false;   // the filter is running (pose and planes valid)
+  bool metric = false;     // lengths are metres
+  std::string note;        // why the step did not track, if it did not
+  std::string scale_note;  // PipelineStep::scale_note: how the metric scale stands
+  bool extended = false;   // PipelineStep::extended: its poses come with a later step
+  PoseQuality quality;     // the anchor's, when tracking
 };
 
 // A filter plane that appeared, changed or went.

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <sstream>
 
 #include "core/common/timing.h"
@@ -37,6 +38,7 @@ struct Run {
   int motion_only_anchors = 0;  // anchors posed without a plane (PoseKind::kMotionOnly)
   int coasting_anchors = 0;     // anchors posed by the motion model (PoseKind::kCoasting)
   ScaleSupport scale_support;
+  std::optional<double> height_road_depression_deg;  // Pipeline's, when metric from the height
   std::map<std::string, int> notes;
 };
 
@@ -68,6 +70,7 @@ StatusOr<Run> RunPipeline(const std::vector<FrameRecord>& frames, const Intrinsi
     run.coasting_anchors += p.quality.kind == PoseKind::kCoasting;
   }
   run.metric = pipeline.metric();
+  run.height_road_depression_deg = pipeline.height_road_depression_deg();
   run.scale_support = pipeline.scale_support();
   return run;
 }
@@ -105,6 +108,9 @@ void ScoreScale(const Run& run, const std::vector<TimedPose>& truth, int source,
     return;
   }
   r->scale_error[source] = e->sim3_scale - 1.0;
+  if (source == kScaleCameraHeight) {
+    r->height_road_depression_deg = run.height_road_depression_deg.value_or(NAN);
+  }
 }
 
 }  // namespace
@@ -236,6 +242,9 @@ std::string SplitTable(const std::vector<DriveResult>& results, DriveSplit split
   md << "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
   std::vector<double> ate_pct, eps_D, posed, epsd, epsn, scale[kNumScaleSources];
   std::vector<double> weak_ate, weak_eps_D, held_ate, held_eps_D;  // by ScaleSupport::Weak
+  // |height scale error| % by how steeply the image saw the road
+  // (ScaleOptions::kMinRoadDepressionDeg).
+  std::vector<double> steep_height, shallow_height;
   int missing = 0, n = 0;
   for (const DriveResult& r : results) {
     if (r.spec.split != split) continue;
@@ -258,6 +267,11 @@ std::string SplitTable(const std::vector<DriveResult>& results, DriveSplit split
     (r.scale_support.Weak() ? weak_eps_D : held_eps_D).push_back(100 * r.eps_D);
     for (int k = 0; k < kNumScaleSources; ++k) {
       if (r.metric[k]) scale[k].push_back(100 * std::abs(r.scale_error[k]));
+    }
+    if (r.metric[kScaleCameraHeight]) {
+      (r.height_road_depression_deg >= ScaleOptions::kMinRoadDepressionDeg ? steep_height
+                                                                           : shallow_height)
+          .push_back(100 * std::abs(r.scale_error[kScaleCameraHeight]));
     }
     if (r.planes_evaluated > 0) {
       epsd.push_back(r.eps_d_m);
@@ -290,6 +304,18 @@ std::string SplitTable(const std::vector<DriveResult>& results, DriveSplit split
        << mw(weak_ate, "%.2f %%") << ", eps_D " << mw(weak_eps_D, "%.2f %%") << "; the other "
        << held_ate.size() << ", ATE " << mw(held_ate, "%.2f %%") << ", eps_D "
        << mw(held_eps_D, "%.2f %%") << ".\n";
+  }
+  if (!scale[kScaleCameraHeight].empty()) {
+    auto beyond3 = [](const std::vector<double>& v) {
+      return std::count_if(v.begin(), v.end(), [](double e) { return e > 3.0; });
+    };
+    md << "\nHeight scale by how steeply the image saw the road (Pipeline::"
+          "height_road_depression_deg): "
+       << steep_height.size() << " metric runs at "
+       << Fmt("%.0f deg", ScaleOptions::kMinRoadDepressionDeg) << " or steeper, |scale error| "
+       << mw(steep_height, "%.1f %%") << ", " << beyond3(steep_height) << " beyond 3 %; "
+       << shallow_height.size() << " shallower (reported weak), " << mw(shallow_height, "%.1f %%")
+       << ", " << beyond3(shallow_height) << " beyond 3 %.\n";
   }
   return md.str();
 }
@@ -334,7 +360,7 @@ std::string DriveResultsCsv(const std::vector<DriveResult>& results) {
          "height,"
          "scale_err_height,metric_speed,scale_err_speed,metric_first_step,scale_err_first_step,"
          "camera_height_m,pitch_down_deg,simulate_s,evaluate_s,note,motion_only_anchors,coasting_"
-         "anchors,extended_pairs,plane_step_share\n";
+         "anchors,extended_pairs,plane_step_share,height_road_depression_deg\n";
   for (const DriveResult& r : results) {
     const SimulateOptions& o = r.spec.sim;
     std::string note = r.note;
@@ -353,7 +379,7 @@ std::string DriveResultsCsv(const std::vector<DriveResult>& results) {
     csv << "," << o.camera_height_min_m << "," << o.pitch_down_min_deg << "," << r.simulate_s << ","
         << r.evaluate_s << ",\"" << note << "\"," << r.motion_only_anchors << ","
         << r.coasting_anchors << "," << r.extended_pairs << "," << r.scale_support.PlaneStepShare()
-        << "\n";
+        << "," << r.height_road_depression_deg << "\n";
   }
   return csv.str();
 }

@@ -11,6 +11,7 @@
 // run metric (e.g. no road tracked for the camera height) is "not metric".
 #pragma once
 
+#include <cmath>
 #include <string>
 #include <vector>
 
@@ -57,6 +58,9 @@ struct DriveResult {
   double eps_d_m = -1.0, eps_n_deg = -1.0;  // -1: no plane evaluated
   bool metric[kNumScaleSources] = {false, false, false};
   double scale_error[kNumScaleSources] = {0, 0, 0};  // valid where metric[] and evaluated
+  // The camera-height run's Pipeline::height_road_depression_deg (NaN when it
+  // did not become metric): how steeply its image saw the road.
+  double height_road_depression_deg = NAN;
   std::string note;  // the most frequent reason a pair did not track (extended pairs aside)
   double simulate_s = 0.0, evaluate_s = 0.0;  // wall time
 };
