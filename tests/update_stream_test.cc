@@ -167,6 +167,14 @@ class UpdateStreamTest : public ::testing::Test {
     drive_ = nullptr;
   }
 
+  // The drive's camera at the stream's frame size.
+  static Intrinsics StreamIntrinsics(const StreamInfo& info) {
+    Intrinsics k = drive_->intrinsics;
+    k.width_px = info.width_px;
+    k.height_px = info.height_px;
+    return k;
+  }
+
   // Runs the drive through a Pipeline with `options`, checking the updates
   // after every step; returns the rescales seen.
   // revise_every > 0: after every that many steps, the latest FRAME pose
@@ -180,9 +188,7 @@ class UpdateStreamTest : public ::testing::Test {
     auto reader = MvReader::Open(drive_->video_path);
     ASSERT_TRUE(reader.ok()) << reader.status().ToString();
     const StreamInfo& info = (*reader)->info();
-    Intrinsics k = drive_->intrinsics;
-    k.width_px = info.width_px;
-    k.height_px = info.height_px;
+    const Intrinsics k = StreamIntrinsics(info);
     Pipeline pipeline(k, info.mv_sigma_px(), options);
     UpdateStream stream;
     Mirror mirror;
@@ -307,9 +313,7 @@ TEST_F(UpdateStreamTest, TheHeightFixSaysHowSteeplyTheRoadWasSeen) {
   auto reader = MvReader::Open(drive_->video_path);
   ASSERT_TRUE(reader.ok()) << reader.status().ToString();
   const StreamInfo& info = (*reader)->info();
-  Intrinsics k = drive_->intrinsics;
-  k.width_px = info.width_px;
-  k.height_px = info.height_px;
+  const Intrinsics k = StreamIntrinsics(info);
   PipelineOptions o;
   o.scale.source = ScaleOptions::Source::kCameraHeight;
   o.scale.camera_height_m = gt->frames[0].world_from_cam.translation.z();
@@ -351,9 +355,7 @@ TEST_F(UpdateStreamTest, ALossIsAVisibleRestart) {
   auto reader = MvReader::Open(drive_->video_path);
   ASSERT_TRUE(reader.ok()) << reader.status().ToString();
   const StreamInfo& info = (*reader)->info();
-  Intrinsics k = drive_->intrinsics;
-  k.width_px = info.width_px;
-  k.height_px = info.height_px;
+  const Intrinsics k = StreamIntrinsics(info);
   Pipeline pipeline(k, info.mv_sigma_px());
   FrameRecord frame;
   bool broke = false;
