@@ -121,6 +121,9 @@ int RunEvalTrajectory(int argc, char** argv) {
       ->check(CLI::Range(0.0, 100.0))
       ->capture_default_str();
   if (int rc = cl.Parse(argc, argv); rc >= 0) return rc;
+  if (!eo.true_vectors && eo.true_vector.noise_px != 0) {
+    return Fail("eval-trajectory", "--true-vector-noise-px needs --true-vectors", 2);
+  }
   if (!cl.positional().empty()) {
     return Fail("eval-trajectory", "unexpected argument '" + cl.positional()[0] + "'", 2);
   }
