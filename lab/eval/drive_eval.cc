@@ -219,7 +219,11 @@ std::string Fmt(const char* fmt, double v) {
 std::string ScaleCell(const DriveResult& r, int k) {
   if (!r.evaluated) return "-";
   if (!r.metric[k]) return "not metric";
-  return Fmt("%+.1f %%", 100 * r.scale_error[k]);
+  // The camera height's scale the pipeline reported weak (a road seen less
+  // steeply than ScaleOptions::kMinRoadDepressionDeg).
+  const bool weak = k == kScaleCameraHeight &&
+                    !(r.height_road_depression_deg >= ScaleOptions::kMinRoadDepressionDeg);
+  return Fmt("%+.1f %%", 100 * r.scale_error[k]) + (weak ? " (weak)" : "");
 }
 
 double Median(std::vector<double> v) {
