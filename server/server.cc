@@ -123,6 +123,11 @@ StatusOr<std::unique_ptr<SlapseServer>> SlapseServer::Start(const ServerOptions&
   grpc::ServerBuilder builder;
   const std::string address = options.address + ":" + std::to_string(options.port);
   builder.AddListeningPort(address, *credentials, &server->port_);
+  // gRPC sets SO_REUSEPORT by default on Linux, which lets a second server
+  // bind a port in use and silently take half its connections (a replica
+  // started twice, or on a peer's port): address reuse only (restarts), as
+  // the HTTP server (http_server.cc).
+  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   builder.RegisterService(&server->service_);
   builder.SetMaxReceiveMessageSize(16 << 20);
   builder.SetOption(std::make_unique<ReflectionOption>(options.reflection));

@@ -199,14 +199,21 @@ TEST(FanoutTlsTest, AsksPeersOverMutualTlsWithTheCallersToken) {
             0);
   testing::WriteFileBytes(dir + "/tokens.json",
                           R"({"tokens": [{"token": "tls-token-0123456789", "tenant": "t"}]})");
+  // Ports first, both probes held until both are known (one released at
+  // once could be handed out again for the second).
   std::vector<int> ports;
-  for (int i = 0; i < 2; ++i) {
-    server::ServerOptions o;
-    o.port = 0;
-    auto probe = server::SlapseServer::Start(o);
-    ASSERT_TRUE(probe.ok());
-    ports.push_back((*probe)->port());
+  {
+    std::vector<std::unique_ptr<server::SlapseServer>> probes;
+    for (int i = 0; i < 2; ++i) {
+      server::ServerOptions o;
+      o.port = 0;
+      auto probe = server::SlapseServer::Start(o);
+      ASSERT_TRUE(probe.ok());
+      ports.push_back((*probe)->port());
+      probes.push_back(std::move(*probe));
+    }
   }
+  ASSERT_NE(ports[0], ports[1]);
   std::vector<std::unique_ptr<server::SlapseServer>> servers;
   std::vector<std::unique_ptr<client::SlapseClient>> clients;
   client::ClientOptions c;

@@ -188,6 +188,21 @@ TEST(MetricsTest, HttpPortInUseIsUnavailable) {
   EXPECT_EQ(SlapseServer::Start(o).status().code(), StatusCode::kInvalidArgument);
 }
 
+// The gRPC port too: a second server on a port in use fails instead of
+// sharing it (gRPC's default SO_REUSEPORT would let both listen, each taking
+// part of the connections).
+TEST(MetricsTest, GrpcPortInUseIsUnavailable) {
+  auto first = StartServer();
+  ASSERT_NE(first, nullptr);
+  ServerOptions o;
+  o.port = first->port();
+  auto second = SlapseServer::Start(o);
+  ASSERT_FALSE(second.ok());
+  EXPECT_EQ(second.status().code(), StatusCode::kUnavailable);
+  EXPECT_NE(second.status().message().find(std::to_string(first->port())), std::string::npos)
+      << second.status().message();
+}
+
 int Health(int port, const std::string& service) {
   return testing::RunCommand(std::string(SLAPSE_CLI) +
                              " health --server 127.0.0.1:" + std::to_string(port) + " --service '" +
