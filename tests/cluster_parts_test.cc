@@ -71,22 +71,31 @@ TEST(ClusterOptionsTest, PeersNeedAReplicaIdAndIdsAreChecked) {
   EXPECT_EQ(server::SlapseServer::Start(o).status().code(), StatusCode::kInvalidArgument);
 }
 
+// `n` distinct free ports for replicas: servers started on port 0, all held
+// until every port is known (a probe released at once could hand its port
+// out again), then released. Empty if a probe fails to start.
+std::vector<int> FreeServerPorts(int n) {
+  std::vector<std::unique_ptr<server::SlapseServer>> probes;
+  std::vector<int> ports;
+  for (int i = 0; i < n; ++i) {
+    server::ServerOptions o;
+    o.port = 0;
+    auto s = server::SlapseServer::Start(o);
+    if (!s.ok()) return {};
+    ports.push_back((*s)->port());
+    probes.push_back(std::move(*s));
+  }
+  return ports;
+}
+
 // Three in-process replicas r0, r1, r2 on loopback, each with every replica
 // (itself included) as a peer.
 class FanoutTest : public ::testing::Test {
  protected:
   void SetUp() override {
     // Ports first (each server on a free one), then the peers of each.
-    std::vector<std::unique_ptr<server::SlapseServer>> probes;
-    for (int i = 0; i < 3; ++i) {
-      server::ServerOptions o;
-      o.port = 0;
-      auto s = server::SlapseServer::Start(o);
-      ASSERT_TRUE(s.ok());
-      ports_.push_back((*s)->port());
-      probes.push_back(std::move(*s));
-    }
-    probes.clear();  // frees the ports for the replicas below
+    ports_ = FreeServerPorts(3);
+    ASSERT_EQ(ports_.size(), 3u);
     std::vector<std::string> peers;
     for (int port : ports_) peers.push_back("127.0.0.1:" + std::to_string(port));
     for (int i = 0; i < 3; ++i) {
@@ -199,21 +208,8 @@ TEST(FanoutTlsTest, AsksPeersOverMutualTlsWithTheCallersToken) {
             0);
   testing::WriteFileBytes(dir + "/tokens.json",
                           R"({"tokens": [{"token": "tls-token-0123456789", "tenant": "t"}]})");
-  // Ports first, both probes held until both are known (one released at
-  // once could be handed out again for the second).
-  std::vector<int> ports;
-  {
-    std::vector<std::unique_ptr<server::SlapseServer>> probes;
-    for (int i = 0; i < 2; ++i) {
-      server::ServerOptions o;
-      o.port = 0;
-      auto probe = server::SlapseServer::Start(o);
-      ASSERT_TRUE(probe.ok());
-      ports.push_back((*probe)->port());
-      probes.push_back(std::move(*probe));
-    }
-  }
-  ASSERT_NE(ports[0], ports[1]);
+  const std::vector<int> ports = FreeServerPorts(2);
+  ASSERT_EQ(ports.size(), 2u);
   std::vector<std::unique_ptr<server::SlapseServer>> servers;
   std::vector<std::unique_ptr<client::SlapseClient>> clients;
   client::ClientOptions c;

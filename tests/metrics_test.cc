@@ -173,34 +173,28 @@ TEST(MetricsTest, SessionRpcsWatchersAndStagesOnMetrics) {
   EXPECT_EQ(status, 200);
 }
 
-TEST(MetricsTest, HttpPortInUseIsUnavailable) {
+// A second server on a port in use fails, naming the port, instead of
+// sharing it: the HTTP port, and the gRPC port (gRPC's default SO_REUSEPORT
+// would let both listen, each taking part of the connections).
+TEST(MetricsTest, PortsInUseAreUnavailable) {
   auto first = StartServer();
   ASSERT_NE(first, nullptr);
+  auto expect_unavailable = [](const ServerOptions& o, int port) {
+    auto second = SlapseServer::Start(o);
+    ASSERT_FALSE(second.ok()) << "port " << port;
+    EXPECT_EQ(second.status().code(), StatusCode::kUnavailable);
+    EXPECT_NE(second.status().message().find(std::to_string(port)), std::string::npos)
+        << second.status().message();
+  };
   ServerOptions o;
   o.port = 0;
   o.http_port = first->http_port();
-  auto second = SlapseServer::Start(o);
-  ASSERT_FALSE(second.ok());
-  EXPECT_EQ(second.status().code(), StatusCode::kUnavailable);
-  EXPECT_NE(second.status().message().find(std::to_string(first->http_port())), std::string::npos)
-      << second.status().message();
+  expect_unavailable(o, first->http_port());
+  ServerOptions g;
+  g.port = first->port();
+  expect_unavailable(g, first->port());
   o.http_port = 70000;
   EXPECT_EQ(SlapseServer::Start(o).status().code(), StatusCode::kInvalidArgument);
-}
-
-// The gRPC port too: a second server on a port in use fails instead of
-// sharing it (gRPC's default SO_REUSEPORT would let both listen, each taking
-// part of the connections).
-TEST(MetricsTest, GrpcPortInUseIsUnavailable) {
-  auto first = StartServer();
-  ASSERT_NE(first, nullptr);
-  ServerOptions o;
-  o.port = first->port();
-  auto second = SlapseServer::Start(o);
-  ASSERT_FALSE(second.ok());
-  EXPECT_EQ(second.status().code(), StatusCode::kUnavailable);
-  EXPECT_NE(second.status().message().find(std::to_string(first->port())), std::string::npos)
-      << second.status().message();
 }
 
 int Health(int port, const std::string& service) {
