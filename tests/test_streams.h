@@ -94,9 +94,9 @@ class LoggedProcess : public ChildProcess {
   void Signal(int sig);
 };
 
-// A TCP port on 127.0.0.1 that nothing listens on (bound, then released; the
-// kernel does not hand it out again right away): for a server the test starts,
-// or a camera that is not there.
+// A TCP port on 127.0.0.1 that nothing listens on (bound, then released),
+// never the same twice in one process: for a server the test starts, or a
+// camera that is not there. 0 if none could be bound.
 int FreeLoopbackTcpPort();
 
 }  // namespace slapse::testing
