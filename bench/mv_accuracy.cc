@@ -161,8 +161,7 @@ void AddFrame(const slapse::GroundTruth& gt, const slapse::FrameRecord& frame, i
               Table* table) {
   const int f = static_cast<int>(frame.index);
   for (const slapse::MotionVector& mv : frame.mvs) {
-    const int64_t ref = mv.direction == slapse::RefDirection::kPast ? frame.prev_anchor_index
-                                                                    : frame.next_anchor_index;
+    const int64_t ref = frame.ReferenceIndex(mv);
     if (ref < 0 || ref >= static_cast<int64_t>(gt.frames.size())) continue;
     if (span > 0 && std::llabs(ref - frame.index) != span) continue;
     const int label = gt.LabelAt(f, mv.x_px, mv.y_px);

@@ -129,8 +129,7 @@ TEST(EvalTest, TrueVectorsReplaceThePlaneBlocksVectorsAndNothingElse) {
 
   // The truth of a vector, or false where the replacement must keep it.
   auto truth = [&](const FrameRecord& fr, const MotionVector& mv, Eigen::Vector2d* d) {
-    const int64_t ref =
-        mv.direction == RefDirection::kPast ? fr.prev_anchor_index : fr.next_anchor_index;
+    const int64_t ref = fr.ReferenceIndex(mv);
     const int label = gt->LabelAt(static_cast<int>(fr.index), mv.x_px, mv.y_px);
     Eigen::Vector2d x_ref;
     if (ref < 0 || label < 0 ||

@@ -40,8 +40,7 @@ struct DriveRun {
 // The road's (plane 0) vectors of frame `f` against the true transfer into their reference.
 void CountRoadVectors(const FrameRecord& f, const GroundTruth& gt, DriveRun* run) {
   for (const MotionVector& mv : f.mvs) {
-    const int64_t ref =
-        mv.direction == RefDirection::kPast ? f.prev_anchor_index : f.next_anchor_index;
+    const int64_t ref = f.ReferenceIndex(mv);
     if (ref < 0 || gt.LabelAt(static_cast<int>(f.index), mv.x_px, mv.y_px) != 0) continue;
     Eigen::Vector2d x_ref;
     const Eigen::Vector2d x(mv.x_px, mv.y_px);

@@ -60,8 +60,7 @@ Agreement Measure(const std::vector<FrameRecord>& frames, GroundTruth gt, int wi
     for (const MotionVector& mv : f.mvs) {
       if (mv.w_px != 16 || mv.h_px != 16) continue;
       const int cur = static_cast<int>(f.index);
-      const int ref = static_cast<int>(mv.direction == RefDirection::kPast ? f.prev_anchor_index
-                                                                           : f.next_anchor_index);
+      const int ref = static_cast<int>(f.ReferenceIndex(mv));
       if (ref < 0) continue;
       const int label = gt.LabelAt(cur, mv.x_px, mv.y_px);
       if (label < 0) continue;  // sky, clutter, mixed

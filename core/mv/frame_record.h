@@ -63,6 +63,12 @@ struct FrameRecord {
   // over the MB grid, (levels / px)^2; empty otherwise (B frames, a frame
   // whose size differs from the stream's first).
   std::vector<float> mb_texture;
+
+  // Display index of the anchor `mv` refers to: prev_anchor_index for a past
+  // vector, next_anchor_index for a future one (-1 when there is none).
+  int64_t ReferenceIndex(const MotionVector& mv) const {
+    return mv.direction == RefDirection::kPast ? prev_anchor_index : next_anchor_index;
+  }
 };
 
 // Facts about the stream known after opening (and refined while reading).

@@ -29,8 +29,7 @@ Status ReplaceWithTrueVectors(const GroundTruth& gt, const TrueVectorOptions& op
     }
     const int f = static_cast<int>(frame.index);
     for (MotionVector& mv : frame.mvs) {
-      const int64_t ref =
-          mv.direction == RefDirection::kPast ? frame.prev_anchor_index : frame.next_anchor_index;
+      const int64_t ref = frame.ReferenceIndex(mv);
       const int label = gt.LabelAt(f, mv.x_px, mv.y_px);
       const Eigen::Vector2d x(mv.x_px, mv.y_px);
       Eigen::Vector2d x_ref;
