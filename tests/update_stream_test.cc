@@ -341,8 +341,7 @@ TEST_F(UpdateStreamTest, TheHeightFixSaysHowSteeplyTheRoadWasSeen) {
   EXPECT_NEAR(seen_deg, truth_deg, 1.5);
   EXPECT_EQ(fix_note.rfind("metric: camera height", 0), 0u) << fix_note;
   EXPECT_NE(fix_note.find("below its horizon"), std::string::npos) << fix_note;
-  EXPECT_EQ(fix_note.find("weak") != std::string::npos,
-            seen_deg < ScaleOptions::kMinRoadDepressionDeg)
+  EXPECT_EQ(fix_note.find("weak") != std::string::npos, ScaleOptions::HeightScaleWeak(seen_deg))
       << fix_note;
 }
 

@@ -477,7 +477,7 @@ void Pipeline::NoteHeightFix(const Eigen::Vector3d& road_pi_cam, const std::stri
   std::snprintf(seen, sizeof seen, "; the image sees the road at most %.1f deg below its horizon",
                 steepest_deg);
   step->scale_note = "metric: " + how + seen;
-  if (!(steepest_deg >= ScaleOptions::kMinRoadDepressionDeg)) {
+  if (ScaleOptions::HeightScaleWeak(steepest_deg)) {
     char weak[240];
     std::snprintf(weak, sizeof weak,
                   " -- weak: below %.0f deg (a short vertical field of view, or the camera "

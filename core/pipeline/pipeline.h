@@ -67,6 +67,11 @@ struct ScaleOptions {
   // frames, 30 deg of vertical field, the camera level or pitched up), on
   // 22 of the 130 above (docs/TRAJECTORY.md "Session 28").
   static constexpr double kMinRoadDepressionDeg = 18.0;
+  // The rule: a camera-height scale fixed from a road seen at most
+  // `road_depression_deg` below its horizon is weak (NaN, no road: weak).
+  static bool HeightScaleWeak(double road_depression_deg) {
+    return !(road_depression_deg >= kMinRoadDepressionDeg);
+  }
 };
 
 // The front end's options (merge, infinity, extraction) and the filter's.

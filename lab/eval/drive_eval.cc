@@ -219,10 +219,9 @@ std::string Fmt(const char* fmt, double v) {
 std::string ScaleCell(const DriveResult& r, int k) {
   if (!r.evaluated) return "-";
   if (!r.metric[k]) return "not metric";
-  // The camera height's scale the pipeline reported weak (a road seen less
-  // steeply than ScaleOptions::kMinRoadDepressionDeg).
-  const bool weak = k == kScaleCameraHeight &&
-                    !(r.height_road_depression_deg >= ScaleOptions::kMinRoadDepressionDeg);
+  // The camera height's scale the pipeline reported weak.
+  const bool weak =
+      k == kScaleCameraHeight && ScaleOptions::HeightScaleWeak(r.height_road_depression_deg);
   return Fmt("%+.1f %%", 100 * r.scale_error[k]) + (weak ? " (weak)" : "");
 }
 
@@ -247,7 +246,7 @@ std::string SplitTable(const std::vector<DriveResult>& results, DriveSplit split
   std::vector<double> ate_pct, eps_D, posed, epsd, epsn, scale[kNumScaleSources];
   std::vector<double> weak_ate, weak_eps_D, held_ate, held_eps_D;  // by ScaleSupport::Weak
   // |height scale error| % by how steeply the image saw the road
-  // (ScaleOptions::kMinRoadDepressionDeg).
+  // (ScaleOptions::HeightScaleWeak).
   std::vector<double> steep_height, shallow_height;
   int missing = 0, n = 0;
   for (const DriveResult& r : results) {
@@ -273,8 +272,7 @@ std::string SplitTable(const std::vector<DriveResult>& results, DriveSplit split
       if (r.metric[k]) scale[k].push_back(100 * std::abs(r.scale_error[k]));
     }
     if (r.metric[kScaleCameraHeight]) {
-      (r.height_road_depression_deg >= ScaleOptions::kMinRoadDepressionDeg ? steep_height
-                                                                           : shallow_height)
+      (ScaleOptions::HeightScaleWeak(r.height_road_depression_deg) ? shallow_height : steep_height)
           .push_back(100 * std::abs(r.scale_error[kScaleCameraHeight]));
     }
     if (r.planes_evaluated > 0) {
