@@ -71,31 +71,16 @@ TEST(ClusterOptionsTest, PeersNeedAReplicaIdAndIdsAreChecked) {
   EXPECT_EQ(server::SlapseServer::Start(o).status().code(), StatusCode::kInvalidArgument);
 }
 
-// `n` distinct free ports for replicas: servers started on port 0, all held
-// until every port is known (a probe released at once could hand its port
-// out again), then released. Empty if a probe fails to start.
-std::vector<int> FreeServerPorts(int n) {
-  std::vector<std::unique_ptr<server::SlapseServer>> probes;
-  std::vector<int> ports;
-  for (int i = 0; i < n; ++i) {
-    server::ServerOptions o;
-    o.port = 0;
-    auto s = server::SlapseServer::Start(o);
-    if (!s.ok()) return {};
-    ports.push_back((*s)->port());
-    probes.push_back(std::move(*s));
-  }
-  return ports;
-}
-
 // Three in-process replicas r0, r1, r2 on loopback, each with every replica
 // (itself included) as a peer.
 class FanoutTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    // Ports first (each server on a free one), then the peers of each.
-    ports_ = FreeServerPorts(3);
-    ASSERT_EQ(ports_.size(), 3u);
+    // Ports first (distinct free ones), then the peers of each.
+    for (int i = 0; i < 3; ++i) {
+      ports_.push_back(testing::FreeLoopbackTcpPort());
+      ASSERT_NE(ports_.back(), 0);
+    }
     std::vector<std::string> peers;
     for (int port : ports_) peers.push_back("127.0.0.1:" + std::to_string(port));
     for (int i = 0; i < 3; ++i) {
@@ -208,8 +193,9 @@ TEST(FanoutTlsTest, AsksPeersOverMutualTlsWithTheCallersToken) {
             0);
   testing::WriteFileBytes(dir + "/tokens.json",
                           R"({"tokens": [{"token": "tls-token-0123456789", "tenant": "t"}]})");
-  const std::vector<int> ports = FreeServerPorts(2);
-  ASSERT_EQ(ports.size(), 2u);
+  const std::vector<int> ports = {testing::FreeLoopbackTcpPort(), testing::FreeLoopbackTcpPort()};
+  ASSERT_NE(ports[0], 0);
+  ASSERT_NE(ports[1], 0);
   std::vector<std::unique_ptr<server::SlapseServer>> servers;
   std::vector<std::unique_ptr<client::SlapseClient>> clients;
   client::ClientOptions c;
