@@ -7,7 +7,7 @@
 //   build/bench/codec_ate --out out/codec_ate --seeds 1,2,3,4,5 --duration-s 5
 //       --presets mpeg2-ibbbp,h264-baseline-ippp-2s [--uncertain-refs keep|drop|consistent]
 //       [--reencode-q 4 --reencode-gop 12 --reencode-b 3 --reencode-dia 4]
-//       [--chain-min-frames 4]
+//       [--min-pair-span-s 0.13]
 // Seeds 1-5 are the tuning seeds (docs/TRAJECTORY.md): choose settings on them only.
 #include <cstdio>
 #include <cstdlib>
@@ -61,8 +61,8 @@ bool Parse(int argc, char** argv, Args* a) {
       a->pipeline.merge.uncertain_refs = v == "keep"   ? U::kKeep
                                          : v == "drop" ? U::kDrop
                                                        : U::kConsistent;
-    } else if (k == "--chain-min-frames") {
-      a->pipeline.merge.chain_min_frames = std::atoi(v.c_str());
+    } else if (k == "--min-pair-span-s") {
+      a->pipeline.merge.min_pair_span_s = std::atof(v.c_str());
     } else if (k == "--reencode-q") {
       a->reader.reencode_options.quantiser = std::atoi(v.c_str());
     } else if (k == "--reencode-gop") {
@@ -123,6 +123,7 @@ int main(int argc, char** argv) {
       while ((*reader)->Next(&f).ok()) {
         if (!pipeline.Push(f).ok()) break;
       }
+      pipeline.Finish();  // the stream's end, as `slapse run`
       std::vector<TimedPose> est;
       for (const auto& p : pipeline.trajectory())
         est.push_back({p.index, p.timestamp_s, p.world_from_cam});

@@ -13,9 +13,10 @@
 // a plane's fitted distance and a road's height would inherit). Reading
 // vectors only (no pipeline): what the method is given.
 //   build/bench/mv_accuracy DRIVE_DIR [DRIVE_DIR ...]
-// With --merged [--chain-min-frames N], the anchor pairs' merged
-// correspondences (core/merge, the pipeline's default MergeOptions, chained
-// P fields with N > 1) are compared instead: each correspondence's earlier
+// With --merged [--min-pair-span-s S], the anchor pairs' merged
+// correspondences (core/merge, the pipeline's default MergeOptions: IPPP
+// fields chained over MergeOptions::min_pair_span_s, S = 0 for one pair per
+// P frame) are compared instead: each correspondence's earlier
 // point against the later MB centre's point transferred through its plane
 // into the earlier anchor; the flow bins are then the pair's true flow.
 // With --span N, only the vectors whose reference is N frames from their own
@@ -239,8 +240,8 @@ int main(int argc, char** argv) {
       span = std::max(1, std::atoi(argv[++a]));
     } else if (arg == "--texture") {
       texture = true;
-    } else if (arg == "--chain-min-frames" && a + 1 < argc) {
-      merge.chain_min_frames = std::max(1, std::atoi(argv[++a]));
+    } else if (arg == "--min-pair-span-s" && a + 1 < argc) {
+      merge.min_pair_span_s = std::max(0.0, std::atof(argv[++a]));
     } else if (!arg.empty() && arg[0] != '-') {
       dirs.push_back(arg);
     } else {
@@ -251,7 +252,7 @@ int main(int argc, char** argv) {
   if (dirs.empty()) {
     std::fprintf(
         stderr,
-        "usage: mv_accuracy [--merged [--chain-min-frames N] | --texture | --span N] DRIVE_DIR "
+        "usage: mv_accuracy [--merged [--min-pair-span-s S] | --texture | --span N] DRIVE_DIR "
         "[DRIVE_DIR ...]\n");
     return 2;
   }

@@ -17,6 +17,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -101,20 +102,22 @@ long RunPipeline(const std::string& path, const slapse::Intrinsics& intrinsics, 
   slapse::Pipeline pipeline(intrinsics, (*reader)->info().mv_sigma_px());
   slapse::FrameRecord f;
   long frames = 0;
+  auto add = [r](const slapse::StageTimes& t) {
+    r->merge_ms += t.merge_ms;
+    r->threshold_ms += t.threshold_ms;
+    r->fit_ms += t.fit_ms;
+    r->ekf_ms += t.ekf_ms;
+    r->frame_poses_ms += t.frame_poses_ms;
+    r->refine_ms += t.refine_ms;
+    ++r->pairs;
+  };
   while ((*reader)->Next(&f).ok()) {
     ++frames;
     auto step = pipeline.Push(f);
-    if (step.ok() && step->has_value()) {
-      const slapse::StageTimes& t = (*step)->times;
-      r->merge_ms += t.merge_ms;
-      r->threshold_ms += t.threshold_ms;
-      r->fit_ms += t.fit_ms;
-      r->ekf_ms += t.ekf_ms;
-      r->frame_poses_ms += t.frame_poses_ms;
-      r->refine_ms += t.refine_ms;
-      ++r->pairs;
-    }
+    if (step.ok() && step->has_value()) add((*step)->times);
   }
+  // The stream's end, as `slapse run`: the open chain's pair is processed too.
+  if (std::optional<slapse::PipelineStep> last = pipeline.Finish()) add(last->times);
   return frames;
 }
 

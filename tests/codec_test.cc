@@ -302,7 +302,7 @@ MergeOptions PanMergeOptions(MergeOptions::UncertainRefs uncertain, bool pyramid
   MergeOptions mo;
   mo.uncertain_refs = uncertain;
   mo.pyramid_top_b = pyramid_top_b;
-  mo.chain_min_frames = 1;
+  mo.min_pair_span_s = 0;  // one pair per P frame
   return mo;
 }
 

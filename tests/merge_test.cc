@@ -360,7 +360,8 @@ TEST(SegmentMergerTest, TextureGateDropsFlatCellsOfTheLaterAnchor) {
     }
   }
   MergeOptions off = options;
-  off.min_mb_texture = 0.0;  // the gate off: every cell
+  off.min_mb_texture = 0.0;   // the gate off: every cell
+  off.min_pair_span_s = 0.0;  // the one-frame P pair is emitted, not chained
   SegmentMerger merger(64, 64, kSigma, off);
   merger.Push(Frame(0, PictureType::kI, -1, -1, v));
   FrameRecord p1 = Frame(1, PictureType::kP, 0, -1, v);
@@ -375,7 +376,9 @@ TEST(SegmentMergerTest, TextureGateDropsFlatCellsOfTheLaterAnchor) {
 // B-frame segment: the segment's pair starts at the handed-back pair's
 // earlier anchor, without vectors (they end at the anchor between).
 TEST(SegmentMergerTest, ExtendChainRefusesBFramePairsAndKeepsPairsContiguousAfterOne) {
-  SegmentMerger merger(64, 64, kSigma);
+  MergeOptions unchained;
+  unchained.min_pair_span_s = 0.0;  // one-frame P pairs, extended only when handed back
+  SegmentMerger merger(64, 64, kSigma, unchained);
   const double v = 0.5;
   merger.Push(Frame(0, PictureType::kI, -1, -1, v));
   for (int b = 1; b <= 3; ++b) merger.Push(Frame(b, PictureType::kB, 0, 4, v));
@@ -449,7 +452,7 @@ TEST(SegmentMergerTest, ChainsIpppVectorFieldsExactlyForAffineMotion) {
   const double s = 0.99;          // content grows 1 % a frame (driving forward)
   const Eigen::Vector2d b(0.7, -0.3), c(80, 60);
   MergeOptions chain4;
-  chain4.chain_min_frames = 4;  // chaining is off by default
+  chain4.min_pair_span_s = 3.5 / 30;  // ZoomFrame: 30 fps, so 4-frame chains
   SegmentMerger merger(160, 128, kSigma, chain4);
   std::vector<AnchorPair> pairs;
   for (int i = 0; i <= 8; ++i) {
@@ -479,7 +482,7 @@ TEST(SegmentMergerTest, ChainsIpppVectorFieldsExactlyForAffineMotion) {
 
 TEST(SegmentMergerTest, ChainingOffKeepsOneFrameSegmentsAndIFramesEndChainsContiguously) {
   MergeOptions off;
-  off.chain_min_frames = 1;
+  off.min_pair_span_s = 0;
   SegmentMerger merger(160, 128, kSigma, off);
   int pairs = 0;
   for (int i = 0; i <= 4; ++i) {
@@ -491,7 +494,7 @@ TEST(SegmentMergerTest, ChainingOffKeepsOneFrameSegmentsAndIFramesEndChainsConti
   EXPECT_EQ(pairs, 4);
   // With chaining, an I frame in the middle restarts the chain.
   MergeOptions on;
-  on.chain_min_frames = 4;
+  on.min_pair_span_s = 3.5 / 30;
   SegmentMerger chained(160, 128, kSigma, on);
   std::vector<AnchorPair> out;
   for (int i = 0; i <= 9; ++i) {
@@ -518,6 +521,46 @@ TEST(SegmentMergerTest, ChainingOffKeepsOneFrameSegmentsAndIFramesEndChainsConti
   for (size_t k = 1; k < out.size(); ++k) EXPECT_EQ(out[k].earlier_index, out[k - 1].later_index);
 }
 
+// The default chain span (MergeOptions::min_pair_span_s, in seconds): IPPP
+// pairs of 2 frames at 30 fps, 3 at 60 fps, 1 at 10 fps, each starting where
+// the last ended; at the stream's end Flush gives the open, shorter chain
+// (its frames would otherwise get no pair), and nothing once none is open.
+TEST(SegmentMergerTest, DefaultChainsSpanTheMinimumTimeAndFlushGivesTheRest) {
+  const MergeOptions defaults;
+  ASSERT_GT(defaults.min_pair_span_s, 1.0 / 30);
+  ASSERT_LT(defaults.min_pair_span_s, 2.0 / 30);
+  for (const auto& [fps, frames_per_pair] : {std::pair{30.0, 2}, {60.0, 3}, {10.0, 1}}) {
+    SCOPED_TRACE(fps);
+    SegmentMerger merger(160, 128, kSigma, defaults);
+    const int last = 3 * frames_per_pair + 1;  // three whole pairs and one frame
+    std::vector<AnchorPair> pairs;
+    for (int i = 0; i <= last; ++i) {
+      FrameRecord f = ZoomFrame(i, 10, 8, 0.99, {0.5, 0});
+      f.timestamp_s = i / fps;
+      if (auto p = merger.Push(f)) pairs.push_back(*p);
+    }
+    std::optional<AnchorPair> rest = merger.Flush();
+    if (frames_per_pair == 1) {
+      EXPECT_EQ(pairs.size(), static_cast<size_t>(last));
+      EXPECT_FALSE(rest.has_value());
+      continue;
+    }
+    ASSERT_EQ(pairs.size(), 3u);
+    for (size_t k = 0; k < pairs.size(); ++k) {
+      EXPECT_EQ(pairs[k].earlier_index, static_cast<int64_t>(k) * frames_per_pair);
+      EXPECT_EQ(pairs[k].later_index - pairs[k].earlier_index, frames_per_pair);
+      EXPECT_GE(pairs[k].later_timestamp_s - pairs[k].earlier_timestamp_s,
+                defaults.min_pair_span_s);
+      EXPECT_GT(pairs[k].correspondences.size(), 40u);
+    }
+    ASSERT_TRUE(rest.has_value());
+    EXPECT_EQ(rest->earlier_index, pairs.back().later_index);
+    EXPECT_EQ(rest->later_index, last);
+    EXPECT_GT(rest->correspondences.size(), 40u);
+    EXPECT_FALSE(merger.Flush().has_value());  // Flush resets
+  }
+}
+
 // ExtendChain (a pair too short to initialise on): with chaining off, the next
 // P frame is composed onto the given pair and emitted at once, as exactly as
 // a fixed chain; each further call extends it again; without a call the
@@ -527,7 +570,9 @@ TEST(SegmentMergerTest, ChainingOffKeepsOneFrameSegmentsAndIFramesEndChainsConti
 TEST(SegmentMergerTest, ExtendChainGrowsTheLastPairFrameByFrame) {
   const double s = 0.99;
   const Eigen::Vector2d b(0.7, -0.3), c(80, 60);
-  SegmentMerger merger(160, 128, kSigma);  // chain_min_frames 1
+  MergeOptions off;
+  off.min_pair_span_s = 0;  // one pair per P frame unless extended
+  SegmentMerger merger(160, 128, kSigma, off);
   std::optional<AnchorPair> pair;
   for (int i = 0; i <= 1; ++i) pair = merger.Push(ZoomFrame(i, 10, 8, s, b));
   ASSERT_TRUE(pair);
@@ -599,7 +644,7 @@ TEST(SegmentMergerTest, ChainsARealH264IpppStreamIntoFourFrameSegments) {
   auto reader = MvReader::Open(path);
   ASSERT_TRUE(reader.ok());
   MergeOptions chain4;
-  chain4.chain_min_frames = 4;  // chaining is off by default
+  chain4.min_pair_span_s = 3.5 / 30;  // WritePan: 30 fps, so 4-frame chains
   SegmentMerger merger(320, 240, (*reader)->info().mv_sigma_px(), chain4);
   FrameRecord f;
   std::vector<AnchorPair> pairs;

@@ -190,6 +190,7 @@ StatusOr<Offline> RunOffline(const testing::TestDrive& drive) {
     ++out.frames;
   }
   if (end.code() != StatusCode::kOutOfRange) return end;
+  pipeline.Finish();  // as the server at the stream's end: the open chain is posed
   out.trajectory = TimedPosesOf(pipeline.poses());
   return out;
 }

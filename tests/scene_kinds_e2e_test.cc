@@ -183,16 +183,19 @@ TEST(SceneKindsEndToEndTest, SlowDriveAt60FpsInitialisesOnAnExtendedBaseline) {
       << "the extension is no longer what initialises this drive";
 }
 
-// The same car park, tracked for 3 s: a one-frame pair too short for its
-// parallax is extended by the next frame (PipelineOptions::
-// track_max_baseline_s) instead of coasting on the motion model. Every frame
-// keeps its pose (the extended pair's frames come with the longer pair);
-// fewer anchors coast, and the trajectory is no worse than coasting's.
+// The same car park, tracked for 3 s on one-frame pairs (min_pair_span_s 0;
+// by default 3 frames are chained): a pair too short for its parallax is
+// extended by the next frame (PipelineOptions::track_max_baseline_s) instead
+// of coasting on the motion model. Every frame keeps its pose (the extended
+// pair's frames come with the longer pair); fewer anchors coast, and the
+// trajectory is no worse than coasting's.
 TEST(SceneKindsEndToEndTest, SlowDriveAt60FpsTracksOnExtendedBaselinesInsteadOfCoasting) {
   const auto slow = SlowCarPark(3.0);
-  PipelineOptions coast;
+  PipelineOptions extend;
+  extend.merge.min_pair_span_s = 0.0;
+  PipelineOptions coast = extend;
   coast.track_max_baseline_s = 0.0;
-  const DriveResult r = RunSmallDrive(SceneKind::kPlaza, 2, {}, "h264-ippp", slow);
+  const DriveResult r = RunSmallDrive(SceneKind::kPlaza, 2, extend, "h264-ippp", slow);
   const DriveResult without = RunSmallDrive(SceneKind::kPlaza, 2, coast, "h264-ippp", slow);
   std::printf("extended %d pairs, coasting anchors %d (without: %d)\n", r.extended_pairs,
               r.coasting_anchors, without.coasting_anchors);

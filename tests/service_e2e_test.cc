@@ -38,14 +38,15 @@ struct OfflineResult {
   bool metric = false;
 };
 
-StatusOr<OfflineResult> RunOffline(const testing::TestDrive& drive) {
+StatusOr<OfflineResult> RunOffline(const testing::TestDrive& drive,
+                                   const PipelineOptions& options = {}) {
   auto reader = MvReader::Open(drive.video_path);
   if (!reader.ok()) return reader.status();
   const StreamInfo& info = (*reader)->info();
   Intrinsics k = drive.intrinsics;
   k.width_px = info.width_px;
   k.height_px = info.height_px;
-  Pipeline pipeline(k, info.mv_sigma_px(), PipelineOptions{});
+  Pipeline pipeline(k, info.mv_sigma_px(), options);
   OfflineResult out;
   FrameRecord frame;
   Status end;
@@ -71,11 +72,15 @@ struct ServedResult {
   int extended_updates = 0;  // PoseUpdate.extended: a pair waiting for the next frame
 };
 
-// Creates an upload session, uploads the drive, watches it to its final
-// event and fetches the snapshots. Failures are gtest failures.
-void Serve(SlapseClient& client, const testing::TestDrive& drive, ServedResult* out) {
+// Creates an upload session (with `options` when given, else the server's
+// defaults), uploads the drive, watches it to its final event and fetches
+// the snapshots. Failures are gtest failures.
+void Serve(SlapseClient& client, const testing::TestDrive& drive, ServedResult* out,
+           const PipelineOptions* options = nullptr) {
   v1::Session request;
   request.mutable_upload();
+  if (options != nullptr)
+    *request.mutable_pipeline_options() = api::PipelineOptionsToProto(*options);
   *request.mutable_intrinsics() = api::IntrinsicsToProto(drive.intrinsics);
   auto created = client.CreateSession(request);
   ASSERT_TRUE(created.ok()) << created.status().ToString();
@@ -259,11 +264,13 @@ TEST_F(ServiceE2eTest, ConcurrentSessionsStayIsolated) {
   }
 }
 
-// A car park at 3-4 m/s, 60 fps, H.264 IPPP: one-frame pairs too short for
-// their parallax wait for the next frame (PipelineOptions::
-// track_max_baseline_s). The session's result equals the offline run to the
-// last frame: a pair still held back when the upload ends is processed at
-// the connection's end (Pipeline::Finish) and its frames' poses are sent.
+// A car park at 3-4 m/s, 60 fps, H.264 IPPP. With the defaults, P frames are
+// chained into 3-frame pairs (MergeOptions::min_pair_span_s); with one-frame
+// pairs, those too short for their parallax wait for the next frame
+// (PipelineOptions::track_max_baseline_s). Either way the session's result
+// equals the offline run to the last frame: a chain still open, or a pair
+// still held back, when the upload ends is processed at the connection's end
+// (Pipeline::Finish) and its frames' poses are sent.
 TEST_F(ServiceE2eTest, SlowIpppDriveIsPosedToItsLastFrameAsOffline) {
   SimulateOptions o = testing::SmallMpeg2DriveOptions(2, 2.0);
   o.scene_kind = SceneKind::kPlaza;
@@ -275,14 +282,22 @@ TEST_F(ServiceE2eTest, SlowIpppDriveIsPosedToItsLastFrameAsOffline) {
   o.encoder = *encoder;
   auto drive = testing::SimulateTestDrive("service_e2e_slow", o);
   ASSERT_TRUE(drive.ok()) << drive.status().ToString();
-  auto offline = RunOffline(*drive);
-  ASSERT_TRUE(offline.ok()) << offline.status().ToString();
-  // Not vacuous: every frame is posed (so the last pair's frames are too).
-  EXPECT_EQ(static_cast<int64_t>(offline->trajectory.size()), offline->frames);
-  ServedResult served;
-  ASSERT_NO_FATAL_FAILURE(Serve(*client_, *drive, &served));
-  ExpectSameResults(*offline, served);
-  EXPECT_GT(served.extended_updates, 0);
+  PipelineOptions one_frame_pairs;
+  one_frame_pairs.merge.min_pair_span_s = 0.0;
+  for (const PipelineOptions* options : {static_cast<const PipelineOptions*>(nullptr),
+                                         static_cast<const PipelineOptions*>(&one_frame_pairs)}) {
+    SCOPED_TRACE(options == nullptr ? "defaults: chained pairs" : "one-frame pairs");
+    auto offline = RunOffline(*drive, options == nullptr ? PipelineOptions{} : *options);
+    ASSERT_TRUE(offline.ok()) << offline.status().ToString();
+    // Not vacuous: every frame is posed (so the last pair's frames are too),
+    // and the drive's 120 frames do not end on a whole chain.
+    EXPECT_EQ(static_cast<int64_t>(offline->trajectory.size()), offline->frames);
+    EXPECT_NE((offline->frames - 1) % 3, 0);
+    ServedResult served;
+    ASSERT_NO_FATAL_FAILURE(Serve(*client_, *drive, &served, options));
+    ExpectSameResults(*offline, served);
+    if (options != nullptr) EXPECT_GT(served.extended_updates, 0);
+  }
   std::filesystem::remove_all(drive->dir);
 }
 

@@ -168,6 +168,16 @@ bool SegmentMerger::ExtendChain(AnchorPair pair) {
   return true;
 }
 
+std::optional<AnchorPair> SegmentMerger::Flush() {
+  std::optional<AnchorPair> open;
+  if (!extend_next_ && chain_.has_value() && earlier_.has_value() &&
+      chain_->later_index == earlier_->index) {
+    open = std::move(chain_);
+  }
+  Reset();
+  return open;
+}
+
 int SegmentMerger::CellOf(const Eigen::Vector2d& x_px) const {
   // The MB grid of core/common/mb_grid.h.
   const MbCell cell = MbCellOfPixel(x_px);
@@ -209,10 +219,8 @@ std::optional<AnchorPair> SegmentMerger::Push(const FrameRecord& frame) {
   if (!IsAnchor(frame.type)) return std::nullopt;
   std::optional<AnchorPair> pair;
   if (earlier_.has_value()) pair = Build(frame);
-  const bool chainable =
-      pair.has_value() && frame.type == PictureType::kP && b_frames_.empty() &&
-      (extend_next_ || (options_.chain_min_frames > 1 &&
-                        pair->later_index - pair->earlier_index < options_.chain_min_frames));
+  const bool chainable = pair.has_value() && frame.type == PictureType::kP && b_frames_.empty() &&
+                         (extend_next_ || ShorterThanMinSpan(*pair));
   if (chainable) {
     pair = Chain(std::move(*pair));
   } else if (pair.has_value() && chain_.has_value() && chain_->later_index == pair->earlier_index &&
@@ -300,7 +308,7 @@ std::optional<AnchorPair> SegmentMerger::Chain(AnchorPair step) {
   } else {
     chain_ = std::move(step);
   }
-  if (!extend_next_ && chain_->later_index - chain_->earlier_index < options_.chain_min_frames) {
+  if (!extend_next_ && ShorterThanMinSpan(*chain_)) {
     return std::nullopt;
   }
   std::optional<AnchorPair> done = std::move(chain_);

@@ -61,19 +61,20 @@ struct MergeOptions {
   bool use_direct = true;
   bool use_indirect = true;
   // IPPP streams (no B frames, one frame between anchors): P-frame vector
-  // fields can be chained (composed, interpolating the earlier field
-  // bilinearly between macroblock cells) until the anchors are at least this
-  // many frames apart, one pair per chain. Segments with B frames are never
-  // chained. 1 (the default) turns chaining off: one pair, and a pose, per P
-  // frame. On the tuning drives (seeds 1-5, H.264 Baseline IPPP, 2 s GOP)
-  // mean ATE was 0.22 % of the distance unchained against 1.67 % with 4-frame
-  // chains (0.77 % with 2, 1.53 % with 8 on seeds 1-4): the composition's
-  // interpolation errors and fewer, longer steps cost more than the
-  // single-frame parallax (docs/METHOD.md "Reference handling", docs/TRAJECTORY.md "Per codec").
-  // Re-measured with today's pipeline (docs/TRAJECTORY.md "Session 16",
-  // h264-ippp tuning drives): 2-frame chains ATE median / worst 0.55 / 1.56 %
-  // against 0.29 / 2.76 % unchained (3-frame: 0.73 / 1.83 %).
-  int chain_min_frames = 1;
+  // fields are chained (composed, interpolating the earlier field bilinearly
+  // between macroblock cells) until the anchors are at least this many
+  // seconds apart, one pair per chain: at the default 0.045 s, 2 frames at
+  // 24-30 fps, 3 at 50-60 fps, 1 at 10-20 fps. Segments with B frames are
+  // never chained; 0 turns chaining off (one pair, and a step, per P frame).
+  // Chosen on the h264-ippp tuning drives (docs/TRAJECTORY.md "Session 29"):
+  // ATE median / worst 0.13 / 1.83 % unchained, 0.08 / 0.95 % at 0.045 s
+  // (0.025 s: 0.11 / 1.72; 0.06 s: 0.09 / 1.20; 0.07 s: 0.10 / 0.95), and half
+  // the pairs or fewer, so the per-pair stages cost half (docs/BENCHMARKS.md).
+  // The frames between a chain's anchors are posed with it
+  // (core/pipeline/frame_poses.h). Earlier, before the window refiner and the
+  // texture gate, one-frame pairs had measured better (docs/METHOD.md
+  // "Reference handling").
+  double min_pair_span_s = 0.045;
   // Direct vectors of a P frame whose reference is not certain
   // (FrameRecord::reference_certain false: several references allowed):
   //  kKeep: used as if they referred to the previous anchor (mixes references);
@@ -162,7 +163,7 @@ class SegmentMerger {
   // `pair`, the pair just emitted, is handed back and becomes the open
   // chain: if the next segment is a one-frame P segment, its vectors are
   // composed onto `pair` and the longer pair is emitted at once, whatever
-  // chain_min_frames (a longer baseline for a pair whose one-frame parallax
+  // min_pair_span_s (a longer baseline for a pair whose one-frame parallax
   // was too small). Ignored unless `pair` ends at the current anchor, has
   // correspondences (a pair into an I frame has none: nothing to compose
   // onto) and its segment had no B frames. A next segment that cannot be
@@ -170,6 +171,11 @@ class SegmentMerger {
   // anchor without correspondences, so that consecutive pairs still share
   // their anchors. Returns whether `pair` was taken.
   bool ExtendChain(AnchorPair pair);
+  // The stream ended: the open chain, shorter than min_pair_span_s, as a
+  // pair (its later anchor is the last one pushed), so that the last frames
+  // are not left out; nullopt when no chain is open (or the open one is a
+  // handed-back pair, ExtendChain: its caller holds it). Then as Reset().
+  std::optional<AnchorPair> Flush();
 
   bool b_pyramid_seen() const { return b_pyramid_seen_; }
   int mb_cols() const { return mb_cols_; }
@@ -177,6 +183,10 @@ class SegmentMerger {
 
  private:
   int CellOf(const Eigen::Vector2d& x_px) const;  // -1 outside the frame
+  // `pair` spans less than min_pair_span_s: a chain continues through it.
+  bool ShorterThanMinSpan(const AnchorPair& pair) const {
+    return pair.later_timestamp_s - pair.earlier_timestamp_s < options_.min_pair_span_s;
+  }
   AnchorPair Build(const FrameRecord& later) const;
   // The later P frame's past vectors to use as direct candidates (all of them
   // when its reference is certain; else as MergeOptions::uncertain_refs says).

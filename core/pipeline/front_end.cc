@@ -15,16 +15,27 @@ FrontEnd::FrontEnd(const Intrinsics& intrinsics, double sigma_px, FrontEndOption
       extractor_(options_.extraction) {}
 
 std::optional<FrontEndStep> FrontEnd::Push(const FrameRecord& frame) {
-  auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = std::chrono::steady_clock::now();
   std::optional<AnchorPair> pair = merger_.Push(frame);
   if (!pair.has_value()) return std::nullopt;
+  return Run(std::move(*pair), MsSince(t0));
+}
+
+std::optional<FrontEndStep> FrontEnd::Flush() {
+  std::optional<FrontEndStep> step;
+  if (std::optional<AnchorPair> pair = merger_.Flush()) step = Run(std::move(*pair), 0.0);
+  Reset();
+  return step;
+}
+
+FrontEndStep FrontEnd::Run(AnchorPair pair, double merge_ms) {
   FrontEndStep step;
-  step.times.merge_ms = MsSince(t0);
-  step.pair = std::move(*pair);
+  step.times.merge_ms = merge_ms;
+  step.pair = std::move(pair);
 
   // Plane at infinity with the pair's motion; the previous pair's motion
   // seeds this pair's.
-  t0 = std::chrono::steady_clock::now();
+  auto t0 = std::chrono::steady_clock::now();
   step.infinity = ThresholdInfinity(step.pair.correspondences, intrinsics_, options_.infinity,
                                     prior_tracker_.PriorFor(step.pair));
   prior_tracker_.Record(step.pair, step.infinity.ok() ? &*step.infinity : nullptr);
@@ -32,9 +43,8 @@ std::optional<FrontEndStep> FrontEnd::Push(const FrameRecord& frame) {
 
   // Planes: without a motion result, none of the pair's correspondences.
   t0 = std::chrono::steady_clock::now();
-  step.extraction = step.infinity.ok()
-                        ? extractor_.Process(step.pair, *step.infinity, intrinsics_)
-                        : extractor_.Process(step.pair, std::vector<int>{});
+  step.extraction = step.infinity.ok() ? extractor_.Process(step.pair, *step.infinity, intrinsics_)
+                                       : extractor_.Process(step.pair, std::vector<int>{});
   step.times.fit_ms = MsSince(t0);
   return step;
 }

@@ -54,6 +54,11 @@ class FrontEnd {
   // closed an anchor pair.
   std::optional<FrontEndStep> Push(const FrameRecord& frame);
 
+  // The stream ended: the open IPPP chain (MergeOptions::min_pair_span_s),
+  // if any, goes through the front end as it is, so that its frames are not
+  // left out; then as Reset(). nullopt: no chain was open.
+  std::optional<FrontEndStep> Flush();
+
   // The stream broke off: drops the open GOP segment, the remembered planes
   // and the motion prior (track ids keep increasing).
   void Reset();
@@ -74,6 +79,9 @@ class FrontEnd {
   const Eigen::Vector3d& vertical_down() const { return extractor_.vertical_down(); }
 
  private:
+  // Motion, plane at infinity and planes of `pair`, merged in merge_ms.
+  FrontEndStep Run(AnchorPair pair, double merge_ms);
+
   Intrinsics intrinsics_;
   FrontEndOptions options_;
   SegmentMerger merger_;

@@ -88,10 +88,14 @@ StatusOr<std::optional<PipelineStep>> Pipeline::Push(const FrameRecord& frame) {
 }
 
 std::optional<PipelineStep> Pipeline::Finish() {
+  // A handed-back pair holds the merger's open chain; otherwise the chain
+  // shorter than min_pair_span_s, if any, is flushed.
+  std::optional<FrontEndStep> last =
+      handed_back_.has_value() ? std::move(handed_back_) : front_end_.Flush();
   std::optional<PipelineStep> step;
-  if (handed_back_.has_value()) {
+  if (last.has_value()) {
     finishing_ = true;
-    step = Process(*handed_back_);
+    step = Process(*last);
     finishing_ = false;
   }
   Break();

@@ -226,9 +226,11 @@ class Pipeline {
 
   // The stream ended (or broke off): a pair that was handed back for a
   // longer baseline while tracking (track_max_baseline_s) and that no later
-  // frame extended is processed as it is, so that its frames get their
-  // poses; then as Break(). Returns that pair's step (nullopt: none was
-  // pending). Without it the last frames of such a stream stay unposed.
+  // frame extended, or else an IPPP chain still shorter than
+  // MergeOptions::min_pair_span_s, is processed as it is, so that its frames
+  // get their poses; then as Break(). Returns that pair's step (nullopt:
+  // none was pending). Without it the last frames of such a stream stay
+  // unposed.
   std::optional<PipelineStep> Finish();
 
   // Pose numbers: the n-th pose of the run (0-based, in display order) has
