@@ -89,6 +89,7 @@ v1::PipelineOptions PipelineOptionsToProto(const PipelineOptions& o) {
   out.set_track_max_baseline_s(o.track_max_baseline_s);
   out.set_refine_window_anchors(o.refine.window_anchors);
   out.set_road_attitude_sigma_deg(o.refine.road_attitude_sigma_deg);
+  out.set_min_pair_span_s(o.merge.min_pair_span_s);
   switch (o.scale.source) {
     case ScaleOptions::Source::kFirstStep:
       out.set_first_step_m(o.scale.first_step_m);
@@ -117,6 +118,7 @@ PipelineOptions PipelineOptionsFromProto(const v1::PipelineOptions& p) {
   if (p.has_init_max_baseline_s()) o.init_max_baseline_s = p.init_max_baseline_s();
   if (p.has_track_max_baseline_s()) o.track_max_baseline_s = p.track_max_baseline_s();
   if (p.refine_window_anchors() > 0) o.refine.window_anchors = p.refine_window_anchors();
+  if (p.has_min_pair_span_s()) o.merge.min_pair_span_s = p.min_pair_span_s();
   if (p.has_road_attitude_sigma_deg()) {
     o.refine.road_attitude_sigma_deg = p.road_attitude_sigma_deg();
   }

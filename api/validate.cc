@@ -491,6 +491,12 @@ Status ValidatePipelineOptions(const v1::PipelineOptions& p) {
       extension(p.has_init_max_baseline_s(), p.init_max_baseline_s(), "init_max_baseline_s"));
   SLAPSE_RETURN_IF_ERROR(
       extension(p.has_track_max_baseline_s(), p.track_max_baseline_s(), "track_max_baseline_s"));
+  if (p.has_min_pair_span_s() && !(Finite(p.min_pair_span_s()) && p.min_pair_span_s() >= 0 &&
+                                   p.min_pair_span_s() <= kMaxMinPairSpanS)) {
+    return InvalidArgumentError("pipeline_options.min_pair_span_s must be in [0, " +
+                                Num(kMaxMinPairSpanS) + "] s (0 = one pair per P frame), got " +
+                                Num(p.min_pair_span_s()));
+  }
   if (p.has_road_attitude_sigma_deg() &&
       !(Finite(p.road_attitude_sigma_deg()) && p.road_attitude_sigma_deg() >= 0 &&
         p.road_attitude_sigma_deg() <= kMaxRoadAttitudeSigmaDeg)) {

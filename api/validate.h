@@ -31,6 +31,8 @@ constexpr double kMaxEpsHPx = 100.0;
 // PipelineOptions.init_max_baseline_s and track_max_baseline_s: the longest
 // accepted extension, s.
 constexpr double kMaxBaselineExtensionS = 5.0;
+// PipelineOptions.min_pair_span_s: the longest accepted chain, s.
+constexpr double kMaxMinPairSpanS = 1.0;
 // PipelineOptions.road_attitude_sigma_deg: the loosest accepted prior, deg.
 constexpr double kMaxRoadAttitudeSigmaDeg = 10.0;
 

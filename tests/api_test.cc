@@ -40,6 +40,7 @@ void ExpectSameCarried(const PipelineOptions& a, const PipelineOptions& b) {
   EXPECT_EQ(a.track_max_baseline_s, b.track_max_baseline_s);
   EXPECT_EQ(a.refine.window_anchors, b.refine.window_anchors);
   EXPECT_EQ(a.refine.road_attitude_sigma_deg, b.refine.road_attitude_sigma_deg);
+  EXPECT_EQ(a.merge.min_pair_span_s, b.merge.min_pair_span_s);
 }
 
 // core -> proto -> core equals, and proto -> core -> proto equals.
@@ -147,6 +148,29 @@ TEST(PipelineOptionsRoundTrip, BaselineExtensions) {
     EXPECT_TRUE(api::ValidatePipelineOptions(p).ok());
     (p.*f.set)(1.0);
     EXPECT_TRUE(api::ValidatePipelineOptions(p).ok());
+  }
+}
+
+// The IPPP chain span: unset is the core default, 0 (one pair per P frame)
+// and other values survive the round trip, out of [0, 1] s is refused
+// naming the field.
+TEST(PipelineOptionsRoundTrip, MinPairSpan) {
+  v1::PipelineOptions p;
+  EXPECT_FALSE(p.has_min_pair_span_s());
+  EXPECT_EQ(api::PipelineOptionsFromProto(p).merge.min_pair_span_s, MergeOptions{}.min_pair_span_s);
+  for (double span_s : {0.0, 0.1}) {
+    PipelineOptions o;
+    o.merge.min_pair_span_s = span_s;
+    ExpectRoundTrips(o);
+    EXPECT_EQ(api::PipelineOptionsToProto(o).min_pair_span_s(), span_s);
+    p.set_min_pair_span_s(span_s);
+    EXPECT_TRUE(api::ValidatePipelineOptions(p).ok());
+  }
+  for (double bad : {-0.01, api::kMaxMinPairSpanS + 0.5, std::numeric_limits<double>::infinity()}) {
+    p.set_min_pair_span_s(bad);
+    const Status s = api::ValidatePipelineOptions(p);
+    EXPECT_EQ(s.code(), StatusCode::kInvalidArgument) << bad;
+    EXPECT_NE(s.message().find("min_pair_span_s"), std::string::npos) << s.message();
   }
 }
 

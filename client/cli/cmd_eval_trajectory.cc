@@ -106,6 +106,12 @@ int RunEvalTrajectory(int argc, char** argv) {
       ->type_name("DEG")
       ->check(CLI::Range(0.0, api::kMaxRoadAttitudeSigmaDeg))
       ->capture_default_str();
+  app.add_option("--min-pair-span-s", eo.pipeline.merge.min_pair_span_s,
+                 "IPPP streams: chain P frames until an anchor pair spans at least this long; "
+                 "0 = one pair per P frame (MergeOptions::min_pair_span_s)")
+      ->type_name("S")
+      ->check(CLI::Range(0.0, api::kMaxMinPairSpanS))
+      ->capture_default_str();
   app.add_option("--refine-extra-sigma-px", eo.pipeline.refine.extra_sigma_px,
                  "added in quadrature to each vector's variance in the refinement "
                  "(WindowRefinerOptions::extra_sigma_px)")

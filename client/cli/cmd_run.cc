@@ -223,6 +223,12 @@ int RunRun(int argc, char** argv) {
                  "(docs/METHOD.md)")
       ->type_name("BOOL")
       ->capture_default_str();
+  app.add_option("--min-pair-span-s", po.merge.min_pair_span_s,
+                 "IPPP streams: chain P frames until an anchor pair spans at least this long; "
+                 "0 = one pair per P frame (docs/METHOD.md)")
+      ->type_name("S")
+      ->check(CLI::Range(0.0, api::kMaxMinPairSpanS))
+      ->capture_default_str();
   app.add_option("--init-max-baseline-s", po.init_max_baseline_s,
                  "while waiting to initialise, extend a one-frame IPPP pair too short to decide "
                  "the motion by the next frames up to this span; 0 = off (docs/METHOD.md)")
