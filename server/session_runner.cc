@@ -259,8 +259,9 @@ bool SessionRunner::Feed(FrameRecord frame) {
 }
 
 // The connection ended: a pair the pipeline still held back for a longer
-// baseline is processed as it is, so its frames' poses are sent too
-// (Pipeline::Finish; a reconnection starts afresh anyway).
+// baseline, or an IPPP chain still shorter than its minimum span, is
+// processed as it is, so its frames' poses are sent too (Pipeline::Finish;
+// a reconnection starts afresh anyway).
 void SessionRunner::FinishConnection() {
   if (!pipeline_.has_value() || last_index_ < 0) return;
   StageTimer pipeline_timer(Stage::kPipeline);

@@ -208,19 +208,35 @@ TEST(FrontEndTextureTest, AFlatSkyGivesNoCorrespondencesAndNoPlane) {
   EXPECT_GT(on.correspondences - on.on_sky, (off.correspondences - off.on_sky) * 9 / 10);
 }
 
-TEST(PipelineStepCountsTest, FinishReplacesTheExtendedStep) {
-  PipelineStep tracked, extended;
-  tracked.tracking = true;
-  extended.extended = true;
+// The step of Pipeline::Finish replaces the extended step that handed its
+// pair back (same anchors); a flushed chain (other anchors) is a pair of its
+// own, and so is any finish step after a step that was not extended.
+TEST(PipelineStepCountsTest, FinishReplacesTheExtendedStepAndAddsAFlushedChain) {
+  auto step = [](int64_t earlier, int64_t later, bool tracking, bool extended) {
+    PipelineStep s;
+    s.earlier_index = earlier;
+    s.later_index = later;
+    s.tracking = tracking;
+    s.extended = extended;
+    return s;
+  };
   PipelineStepCounts counts;
-  counts.Add(tracked);
-  counts.Add(extended);
+  counts.Add(step(0, 2, true, false));
+  counts.Add(step(2, 4, false, true));
   EXPECT_EQ(counts.pairs, 2);
   EXPECT_EQ(counts.extended, 1);
-  counts.AddFinish(tracked);
+  counts.AddFinish(step(2, 4, true, false));  // the handed-back pair, processed
   EXPECT_EQ(counts.pairs, 2);
   EXPECT_EQ(counts.tracked, 2);
   EXPECT_EQ(counts.extended, 0);
+
+  PipelineStepCounts chained;
+  chained.Add(step(0, 2, true, false));
+  chained.Add(step(2, 4, true, false));
+  chained.AddFinish(step(4, 5, true, false));  // the open chain, flushed
+  EXPECT_EQ(chained.pairs, 3);
+  EXPECT_EQ(chained.tracked, 3);
+  EXPECT_EQ(chained.extended, 0);
 }
 
 }  // namespace

@@ -187,9 +187,10 @@ struct PipelineStep {
   std::vector<FramePose> frame_poses;
 };
 
-// A run's anchor pairs, each counted once: the step Pipeline::Finish returns
-// is the same pair as the extended step that handed it back, so it replaces
-// that one (`run` and the trajectory evaluation report these counts).
+// A run's anchor pairs, each counted once: when the step Pipeline::Finish
+// returns is the pair the last extended step handed back (same anchors), it
+// replaces that one; a flushed IPPP chain is a pair of its own (`run` and
+// the trajectory evaluation report these counts).
 struct PipelineStepCounts {
   int pairs = 0, tracked = 0, extended = 0;
   // A step of Pipeline::Push.
@@ -197,13 +198,21 @@ struct PipelineStepCounts {
     ++pairs;
     tracked += step.tracking;
     extended += step.extended;
+    last_extended_ = step.extended ? std::optional(std::pair(step.earlier_index, step.later_index))
+                                   : std::nullopt;
   }
   // The step of Pipeline::Finish.
   void AddFinish(const PipelineStep& step) {
-    --pairs;
-    --extended;
+    if (last_extended_ == std::pair(step.earlier_index, step.later_index)) {
+      --pairs;
+      --extended;
+    }
     Add(step);
   }
+
+ private:
+  // The anchors of the last step added, if it was extended.
+  std::optional<std::pair<int64_t, int64_t>> last_extended_;
 };
 
 class Pipeline {
