@@ -482,11 +482,11 @@ void Pipeline::NoteHeightFix(const Eigen::Vector3d& road_pi_cam, const std::stri
                 steepest_deg);
   step->scale_note = "metric: " + how + seen;
   if (ScaleOptions::HeightScaleWeak(steepest_deg)) {
-    char weak[240];
+    char weak[256];
     std::snprintf(weak, sizeof weak,
                   " -- weak: below %.0f deg (a short vertical field of view, or the camera "
-                  "pitched up) the height places the scale only to several %% "
-                  "(docs/TRAJECTORY.md \"Session 28\")",
+                  "pitched up) the height does not place the scale reliably: "
+                  "expect errors of several %% or more (docs/TRAJECTORY.md \"Session 28\")",
                   ScaleOptions::kMinRoadDepressionDeg);
     step->scale_note += weak;
   }
