@@ -561,6 +561,42 @@ TEST(SegmentMergerTest, DefaultChainsSpanTheMinimumTimeAndFlushGivesTheRest) {
   }
 }
 
+// A stream with adaptive B frames (x264's defaults): a chain still open when
+// the first B frame comes is emitted then, as it is (the B segment's pair
+// starts where it ends: no frame falls between two pairs), and once a B frame
+// has been seen the stream's P-P segments are one pair each.
+TEST(SegmentMergerTest, ABFrameClosesTheOpenChainAndEndsChaining) {
+  SegmentMerger merger(64, 64, kSigma);  // default min_pair_span_s: 2 frames at 30 fps
+  const double v = 0.5;
+  std::vector<AnchorPair> pairs;
+  auto push = [&](const FrameRecord& f) {
+    if (auto p = merger.Push(f)) pairs.push_back(*p);
+  };
+  push(Frame(0, PictureType::kI, -1, -1, v));
+  push(Frame(1, PictureType::kP, 0, -1, v));
+  push(Frame(2, PictureType::kP, 1, -1, v));  // closes the chain 0 -> 2
+  push(Frame(3, PictureType::kP, 2, -1, v));  // opens 2 -> 3
+  ASSERT_EQ(pairs.size(), 1u);
+  push(Frame(4, PictureType::kB, 3, 5, v));  // the open chain 2 -> 3 is emitted
+  ASSERT_EQ(pairs.size(), 2u);
+  EXPECT_EQ(pairs[1].earlier_index, 2);
+  EXPECT_EQ(pairs[1].later_index, 3);
+  EXPECT_FALSE(pairs[1].correspondences.empty());
+  push(Frame(5, PictureType::kP, 3, -1, v));  // the B segment 3 -> 5
+  push(Frame(6, PictureType::kP, 5, -1, v));  // a P-P segment: not chained any more
+  push(Frame(7, PictureType::kP, 6, -1, v));
+  ASSERT_EQ(pairs.size(), 5u);
+  EXPECT_EQ(pairs[2].earlier_index, 3);
+  EXPECT_EQ(pairs[2].later_index, 5);
+  EXPECT_EQ(pairs[2].n_b, 1);
+  for (size_t k = 3; k < pairs.size(); ++k) {
+    EXPECT_EQ(pairs[k].later_index - pairs[k].earlier_index, 1);
+  }
+  for (size_t k = 1; k < pairs.size(); ++k)
+    EXPECT_EQ(pairs[k].earlier_index, pairs[k - 1].later_index);
+  EXPECT_FALSE(merger.Flush().has_value());
+}
+
 // ExtendChain (a pair too short to initialise on): with chaining off, the next
 // P frame is composed onto the given pair and emitted at once, as exactly as
 // a fixed chain; each further call extends it again; without a call the

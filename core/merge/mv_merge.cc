@@ -207,6 +207,7 @@ void StartAtChain(const AnchorPair& chain, AnchorPair* pair) {
 
 std::optional<AnchorPair> SegmentMerger::Push(const FrameRecord& frame) {
   if (frame.type == PictureType::kB) {
+    b_frames_seen_ = true;
     // Keep only B frames that sit between the current anchor and a later one.
     for (const FrameRecord& b : b_frames_) {
       if (frame.coded_index >= 0 && b.coded_index > frame.coded_index) b_pyramid_seen_ = true;
@@ -214,13 +215,24 @@ std::optional<AnchorPair> SegmentMerger::Push(const FrameRecord& frame) {
     if (earlier_.has_value() && frame.prev_anchor_index == earlier_->index && !frame.corrupt) {
       b_frames_.push_back(frame);
     }
+    // A chain still shorter than min_pair_span_s when the first B frame
+    // comes (a stream with adaptive B frames): the B segment cannot be
+    // composed onto it, so it is emitted as it is; dropped, its frames would
+    // fall between two pairs. A handed-back pair (ExtendChain) stays with
+    // the rule of a chain cut short (Push of the next anchor).
+    if (!extend_next_ && chain_.has_value() && earlier_.has_value() &&
+        chain_->later_index == earlier_->index) {
+      std::optional<AnchorPair> done = std::move(chain_);
+      chain_.reset();
+      return done;
+    }
     return std::nullopt;
   }
   if (!IsAnchor(frame.type)) return std::nullopt;
   std::optional<AnchorPair> pair;
   if (earlier_.has_value()) pair = Build(frame);
   const bool chainable = pair.has_value() && frame.type == PictureType::kP && b_frames_.empty() &&
-                         (extend_next_ || ShorterThanMinSpan(*pair));
+                         (extend_next_ || (!b_frames_seen_ && ShorterThanMinSpan(*pair)));
   if (chainable) {
     pair = Chain(std::move(*pair));
   } else if (pair.has_value() && chain_.has_value() && chain_->later_index == pair->earlier_index &&
@@ -308,7 +320,7 @@ std::optional<AnchorPair> SegmentMerger::Chain(AnchorPair step) {
   } else {
     chain_ = std::move(step);
   }
-  if (!extend_next_ && ShorterThanMinSpan(*chain_)) {
+  if (!extend_next_ && !b_frames_seen_ && ShorterThanMinSpan(*chain_)) {
     return std::nullopt;
   }
   std::optional<AnchorPair> done = std::move(chain_);

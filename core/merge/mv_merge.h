@@ -65,7 +65,10 @@ struct MergeOptions {
   // between macroblock cells) until the anchors are at least this many
   // seconds apart, one pair per chain: at the default 0.045 s, 2 frames at
   // 24-30 fps, 3 at 50-60 fps, 1 at 10-20 fps. Segments with B frames are
-  // never chained; 0 turns chaining off (one pair, and a step, per P frame).
+  // never chained, nor, once a B frame has been seen, the P-P segments of a
+  // stream with adaptive B frames (x264's defaults: chaining them made one
+  // of five reporting drives 0.05 -> 0.22 %, bench/codec_ate seed 7); 0 turns
+  // chaining off (one pair, and a step, per P frame).
   // Chosen on the h264-ippp tuning drives (docs/TRAJECTORY.md "Session 29"):
   // ATE median / worst 0.13 / 1.83 % unchained, 0.08 / 0.95 % at 0.045 s
   // (0.025 s: 0.11 / 1.72; 0.06 s: 0.09 / 1.20; 0.07 s: 0.10 / 0.95), and half
@@ -222,6 +225,9 @@ class SegmentMerger {
   bool extend_next_ = false;  // ExtendChain: emit the next composition at once
   bool last_had_b_ = false;   // the last segment closed had B frames (ExtendChain refuses it)
   bool b_pyramid_seen_ = false;
+  // A B frame has been seen: the stream is not IPPP, and its P-P segments
+  // (adaptive B frames) are not chained to min_pair_span_s.
+  bool b_frames_seen_ = false;
 };
 
 }  // namespace slapse
