@@ -561,6 +561,25 @@ TEST(SegmentMergerTest, DefaultChainsSpanTheMinimumTimeAndFlushGivesTheRest) {
   }
 }
 
+// Timestamps that cannot be trusted never make a chain run away: equal
+// timestamps (a stream without any) give one pair per P frame, and timestamps
+// far too close together (wrong units) stop at kMaxChainFrames.
+TEST(SegmentMergerTest, ChainsNeedIncreasingTimestampsAndStopAtTheFrameCap) {
+  for (const double dt_s : {0.0, 1e-6}) {
+    SCOPED_TRACE(dt_s);
+    SegmentMerger merger(160, 128, kSigma);
+    std::vector<AnchorPair> pairs;
+    for (int i = 0; i <= 2 * MergeOptions::kMaxChainFrames; ++i) {
+      FrameRecord f = ZoomFrame(i, 10, 8, 0.99, {0.5, 0});
+      f.timestamp_s = i * dt_s;
+      if (auto p = merger.Push(f)) pairs.push_back(*p);
+    }
+    const int64_t frames = dt_s > 0 ? MergeOptions::kMaxChainFrames : 1;
+    ASSERT_EQ(pairs.size(), static_cast<size_t>(2 * MergeOptions::kMaxChainFrames / frames));
+    for (const AnchorPair& p : pairs) EXPECT_EQ(p.later_index - p.earlier_index, frames);
+  }
+}
+
 // A stream with adaptive B frames (x264's defaults): a chain still open when
 // the first B frame comes is emitted then, as it is (the B segment's pair
 // starts where it ends: no frame falls between two pairs), and once a B frame

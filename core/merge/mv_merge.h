@@ -78,6 +78,9 @@ struct MergeOptions {
   // texture gate, one-frame pairs had measured better (docs/METHOD.md
   // "Reference handling").
   double min_pair_span_s = 0.045;
+  // The longest chain, frames, whatever the timestamps (a 240 fps camera
+  // reaches 0.045 s in 11 frames).
+  static constexpr int kMaxChainFrames = 16;
   // Direct vectors of a P frame whose reference is not certain
   // (FrameRecord::reference_certain false: several references allowed):
   //  kKeep: used as if they referred to the previous anchor (mixes references);
@@ -187,8 +190,12 @@ class SegmentMerger {
  private:
   int CellOf(const Eigen::Vector2d& x_px) const;  // -1 outside the frame
   // `pair` spans less than min_pair_span_s: a chain continues through it.
+  // Timestamps that do not increase (a stream without them) never chain, and
+  // a chain stops at kMaxChainFrames whatever its timestamps say.
   bool ShorterThanMinSpan(const AnchorPair& pair) const {
-    return pair.later_timestamp_s - pair.earlier_timestamp_s < options_.min_pair_span_s;
+    const double dt_s = pair.later_timestamp_s - pair.earlier_timestamp_s;
+    return dt_s > 0 && dt_s < options_.min_pair_span_s &&
+           pair.later_index - pair.earlier_index < MergeOptions::kMaxChainFrames;
   }
   AnchorPair Build(const FrameRecord& later) const;
   // The later P frame's past vectors to use as direct candidates (all of them
