@@ -70,9 +70,11 @@ struct MergeOptions {
   // of five reporting drives 0.05 -> 0.22 %, bench/codec_ate seed 7); 0 turns
   // chaining off (one pair, and a step, per P frame).
   // Chosen on the h264-ippp tuning drives (docs/TRAJECTORY.md "Session 29"):
-  // ATE median / worst 0.13 / 1.83 % unchained, 0.08 / 0.95 % at 0.045 s
-  // (0.025 s: 0.11 / 1.72; 0.06 s: 0.09 / 1.20; 0.07 s: 0.10 / 0.95), and half
-  // the pairs or fewer, so the per-pair stages cost half (docs/BENCHMARKS.md).
+  // ATE median / worst 0.13 / 1.83 % unchained, 0.09 / 0.95 % at 0.045 s
+  // (0.025 s: 0.11 / 1.72; 0.06 s: 0.09 / 1.20; 0.07 s: 0.10 / 0.95); half
+  // the pairs at 30 fps, the stages 13 % cheaper on a 30 fps camera stream
+  // (each pair costs more, and the frame between is posed on its own;
+  // docs/BENCHMARKS.md "Session 29").
   // The frames between a chain's anchors are posed with it
   // (core/pipeline/frame_poses.h). Earlier, before the window refiner and the
   // texture gate, one-frame pairs had measured better (docs/METHOD.md
