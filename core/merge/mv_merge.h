@@ -78,7 +78,7 @@ struct MergeOptions {
   // The frames between a chain's anchors are posed with it
   // (core/pipeline/frame_poses.h). Earlier, before the window refiner and the
   // texture gate, one-frame pairs had measured better (docs/METHOD.md
-  // "Reference handling").
+  // "Beyond the paper").
   double min_pair_span_s = 0.045;
   // The longest chain, frames, whatever the timestamps (a 240 fps camera
   // reaches 0.045 s in 11 frames).
