@@ -557,7 +557,7 @@ TEST(SegmentMergerTest, DefaultChainsSpanTheMinimumTimeAndFlushGivesTheRest) {
     EXPECT_EQ(rest->earlier_index, pairs.back().later_index);
     EXPECT_EQ(rest->later_index, last);
     EXPECT_GT(rest->correspondences.size(), 40u);
-    EXPECT_FALSE(merger.Flush().has_value());  // Flush resets
+    EXPECT_FALSE(merger.Flush().has_value());  // nothing is open any more
   }
 }
 

@@ -169,12 +169,12 @@ bool SegmentMerger::ExtendChain(AnchorPair pair) {
 }
 
 std::optional<AnchorPair> SegmentMerger::Flush() {
-  std::optional<AnchorPair> open;
-  if (!extend_next_ && chain_.has_value() && earlier_.has_value() &&
-      chain_->later_index == earlier_->index) {
-    open = std::move(chain_);
+  if (extend_next_ || !chain_.has_value() || !earlier_.has_value() ||
+      chain_->later_index != earlier_->index) {
+    return std::nullopt;
   }
-  Reset();
+  std::optional<AnchorPair> open = std::move(chain_);
+  chain_.reset();
   return open;
 }
 
@@ -220,19 +220,13 @@ std::optional<AnchorPair> SegmentMerger::Push(const FrameRecord& frame) {
     // composed onto it, so it is emitted as it is; dropped, its frames would
     // fall between two pairs. A handed-back pair (ExtendChain) stays with
     // the rule of a chain cut short (Push of the next anchor).
-    if (!extend_next_ && chain_.has_value() && earlier_.has_value() &&
-        chain_->later_index == earlier_->index) {
-      std::optional<AnchorPair> done = std::move(chain_);
-      chain_.reset();
-      return done;
-    }
-    return std::nullopt;
+    return Flush();
   }
   if (!IsAnchor(frame.type)) return std::nullopt;
   std::optional<AnchorPair> pair;
   if (earlier_.has_value()) pair = Build(frame);
   const bool chainable = pair.has_value() && frame.type == PictureType::kP && b_frames_.empty() &&
-                         (extend_next_ || (!b_frames_seen_ && ShorterThanMinSpan(*pair)));
+                         (extend_next_ || ShorterThanMinSpan(*pair));
   if (chainable) {
     pair = Chain(std::move(*pair));
   } else if (pair.has_value() && chain_.has_value() && chain_->later_index == pair->earlier_index &&
@@ -320,7 +314,7 @@ std::optional<AnchorPair> SegmentMerger::Chain(AnchorPair step) {
   } else {
     chain_ = std::move(step);
   }
-  if (!extend_next_ && !b_frames_seen_ && ShorterThanMinSpan(*chain_)) {
+  if (!extend_next_ && ShorterThanMinSpan(*chain_)) {
     return std::nullopt;
   }
   std::optional<AnchorPair> done = std::move(chain_);

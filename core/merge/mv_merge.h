@@ -179,10 +179,11 @@ class SegmentMerger {
   // anchor without correspondences, so that consecutive pairs still share
   // their anchors. Returns whether `pair` was taken.
   bool ExtendChain(AnchorPair pair);
-  // The stream ended: the open chain, shorter than min_pair_span_s, as a
-  // pair (its later anchor is the last one pushed), so that the last frames
-  // are not left out; nullopt when no chain is open (or the open one is a
-  // handed-back pair, ExtendChain: its caller holds it). Then as Reset().
+  // The open chain, shorter than min_pair_span_s, as a pair now (its later
+  // anchor is the last one pushed), so that its frames are not left out:
+  // at the stream's end, and when a B frame follows it (Push); nullopt when
+  // no chain is open (or the open one is a handed-back pair, ExtendChain:
+  // its caller holds it). The merger carries on from its last anchor.
   std::optional<AnchorPair> Flush();
 
   bool b_pyramid_seen() const { return b_pyramid_seen_; }
@@ -192,11 +193,12 @@ class SegmentMerger {
  private:
   int CellOf(const Eigen::Vector2d& x_px) const;  // -1 outside the frame
   // `pair` spans less than min_pair_span_s: a chain continues through it.
-  // Timestamps that do not increase (a stream without them) never chain, and
-  // a chain stops at kMaxChainFrames whatever its timestamps say.
+  // Only IPPP streams chain (no B frame seen); timestamps that do not
+  // increase (a stream without them) never chain, and a chain stops at
+  // kMaxChainFrames whatever its timestamps say.
   bool ShorterThanMinSpan(const AnchorPair& pair) const {
     const double dt_s = pair.later_timestamp_s - pair.earlier_timestamp_s;
-    return dt_s > 0 && dt_s < options_.min_pair_span_s &&
+    return !b_frames_seen_ && dt_s > 0 && dt_s < options_.min_pair_span_s &&
            pair.later_index - pair.earlier_index < MergeOptions::kMaxChainFrames;
   }
   AnchorPair Build(const FrameRecord& later) const;
