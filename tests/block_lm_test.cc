@@ -200,6 +200,105 @@ TEST(BlockLmTest, ACandidateThatCannotBeEvaluatedIsARejectedStep) {
   EXPECT_EQ(x, 2.5);
 }
 
+// The scene's projection residuals as one NormalEquationsCost: its normal
+// equations formed from the stacked autodiff Jacobians over the ambient
+// coordinates (q's four, c's three, s), as a cost that knows its structure
+// would form them more cheaply.
+class StackedProjections : public NormalEquationsCost {
+ public:
+  explicit StackedProjections(const Scene& scene) {
+    for (size_t j = 0; j < scene.X0.size(); ++j) parts_.emplace_back(Projection(scene, j));
+    set_num_residuals(2 * static_cast<int>(parts_.size()));
+    *mutable_parameter_block_sizes() = {4, 3, 1};
+  }
+  bool Evaluate(double const* const* p, double* r, double** jac) const override {
+    for (size_t j = 0; j < parts_.size(); ++j) {
+      double* part_jac[3] = {nullptr, nullptr, nullptr};
+      for (int b = 0; b < 3 && jac != nullptr; ++b) {
+        if (jac[b] != nullptr) part_jac[b] = jac[b] + 2 * j * parameter_block_sizes()[b];
+      }
+      if (!parts_[j]->Evaluate(p, r + 2 * j, jac != nullptr ? part_jac : nullptr)) return false;
+    }
+    return true;
+  }
+  bool EvaluateNormalEquations(double const* const* p, double* half, Eigen::VectorXd* g,
+                               Eigen::MatrixXd* H) const override {
+    const int m = num_residuals();
+    std::vector<double> r(m), jq(m * 4), jc(m * 3), js(m);
+    double* jac[3] = {jq.data(), jc.data(), js.data()};
+    if (!Evaluate(p, r.data(), jac)) return false;
+    Eigen::MatrixXd J(m, 8);
+    for (int i = 0; i < m; ++i) {
+      J.row(i) << jq[4 * i], jq[4 * i + 1], jq[4 * i + 2], jq[4 * i + 3], jc[3 * i], jc[3 * i + 1],
+          jc[3 * i + 2], js[i];
+    }
+    const Eigen::Map<const Eigen::VectorXd> rv(r.data(), m);
+    *half = 0.5 * rv.squaredNorm();
+    *g = J.transpose() * rv;
+    *H = J.transpose() * J;
+    return true;
+  }
+
+ private:
+  std::vector<std::unique_ptr<ceres::CostFunction>> parts_;
+};
+
+// The solve from the stacked block's normal equations takes the same steps as
+// the one from the per-point Jacobians, with every block free and with the
+// centre held constant (its rows of the ambient normal equations are then
+// dropped).
+TEST(BlockLmTest, NormalEquationsCostTakesTheSameSteps) {
+  for (bool centre_constant : {false, true}) {
+    for (int iterations : {1, 3, 50}) {
+      SCOPED_TRACE(::testing::Message()
+                   << "centre constant " << centre_constant << ", " << iterations << " iterations");
+      Params a, b;
+      const Scene scene = MakeScene(&a);
+      MakeScene(&b);
+      BlockLmSummary sa, sb;
+      for (Params* p : {&a, &b}) {
+        BlockLmProblem problem;
+        ASSERT_TRUE(problem.AddQuaternionBlock(p->q.coeffs().data()).ok());
+        ASSERT_TRUE(problem.AddVectorBlock(p->c.data(), 3).ok());
+        ASSERT_TRUE(problem.AddVectorBlock(&p->s, 1).ok());
+        if (centre_constant) {
+          ASSERT_TRUE(problem.SetConstant(p->c.data()).ok());
+        }
+        const std::vector<double*> blocks = {p->q.coeffs().data(), p->c.data(), &p->s};
+        if (p == &a) {
+          for (size_t j = 0; j < scene.X0.size(); ++j) {
+            ASSERT_TRUE(problem
+                            .AddResidualBlock(
+                                std::unique_ptr<ceres::CostFunction>(Projection(scene, j)), blocks)
+                            .ok());
+          }
+        } else {
+          ASSERT_TRUE(
+              problem.AddResidualBlock(std::make_unique<StackedProjections>(scene), blocks).ok());
+        }
+        ASSERT_TRUE(
+            problem
+                .AddResidualBlock(
+                    std::make_unique<ceres::AutoDiffCostFunction<ScalePrior, 1, 1>>(new ScalePrior),
+                    {&p->s})
+                .ok());
+        BlockLmOptions options;
+        options.max_iterations = iterations;
+        ASSERT_TRUE(problem.Solve(options, p == &a ? &sa : &sb).ok());
+      }
+      EXPECT_LT(sb.final_cost, sb.initial_cost);
+      EXPECT_NEAR(sb.final_cost, sa.final_cost, 1e-9 * sa.final_cost);
+      EXPECT_EQ(sb.iterations, sa.iterations);
+      EXPECT_LT(a.q.angularDistance(b.q), 1e-9);
+      EXPECT_LT((a.c - b.c).norm(), 1e-9);
+      EXPECT_NEAR(a.s, b.s, 1e-9);
+      if (centre_constant) {
+        EXPECT_EQ(b.c, Eigen::Vector3d(0.0, 0.1, 0.0));
+      }
+    }
+  }
+}
+
 TEST(BlockLmTest, ContractErrors) {
   double x[3] = {0, 0, 0}, y = 0, q[4] = {0, 0, 0, 1};
   BlockLmProblem problem;

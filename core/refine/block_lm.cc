@@ -102,6 +102,7 @@ Status BlockLmProblem::AddResidualBlock(std::unique_ptr<ceres::CostFunction> cos
     r.blocks.push_back(i);
   }
   num_residuals_ += cost->num_residuals();
+  r.normal = dynamic_cast<const NormalEquationsCost*>(cost.get());
   r.cost = std::move(cost);
   residuals_.push_back(std::move(r));
   return Status::Ok();
@@ -134,6 +135,15 @@ class BlockLmProblem::Evaluator {
         const Block& b = blocks_[res.blocks[k]];
         params_[k] = b.data;
         if (with_jacobian && !b.constant) jac_size += static_cast<size_t>(m) * b.size;
+      }
+      if (with_jacobian && res.normal != nullptr) {
+        double half = 0;
+        if (!res.normal->EvaluateNormalEquations(params_.data(), &half, &g_ambient_, &H_ambient_) ||
+            !std::isfinite(half) || !AccumulateNormal(res, g, H)) {
+          return false;
+        }
+        *cost += half;
+        continue;
       }
       if (jac_.size() < jac_size) jac_.resize(jac_size);
       for (size_t k = 0, at = 0; k < nb && with_jacobian; ++k) {
@@ -202,6 +212,70 @@ class BlockLmProblem::Evaluator {
     JtJ.selfadjointView<Eigen::Lower>().rankUpdate(J.transpose());
     Eigen::Map<Eigen::VectorXd>(Jtr_.data(), t).noalias() =
         J.transpose() * Eigen::Map<const Eigen::VectorXd>(r_.data(), m);
+    return Scatter(t, g, H);
+  }
+
+  // A NormalEquationsCost's ambient g_a and H_a (g_ambient_, H_ambient_) in
+  // tangent coordinates: with T the ambient-from-tangent map of the
+  // non-constant blocks (block diagonal: a quaternion's plus-Jacobian P,
+  // else the identity; a constant block has no column), J_t = J_a T, so
+  // J_t^T r = T^T g_a and J_t^T J_t = T^T H_a T, formed block by block
+  // (rows R = T^T H_a, then R T).
+  bool AccumulateNormal(const Residual& res, Eigen::VectorXd* g, Eigen::MatrixXd* H) {
+    int p = 0, t = 0;
+    global_.clear();
+    for (int i : res.blocks) {
+      p += blocks_[i].size;
+      if (blocks_[i].constant) continue;
+      for (int c = 0; c < blocks_[i].tangent; ++c) global_.push_back(blocks_[i].offset + c);
+      t += blocks_[i].tangent;
+    }
+    if (g_ambient_.size() != p || H_ambient_.rows() != p || H_ambient_.cols() != p) return false;
+    if (t == 0) return true;
+    Jtr_.resize(t);
+    Eigen::Map<Eigen::VectorXd> Jtr(Jtr_.data(), t);
+    R_.resize(t, p);
+    int a = 0, row = 0;
+    for (int i : res.blocks) {
+      const Block& b = blocks_[i];
+      if (b.constant) {
+        a += b.size;
+        continue;
+      }
+      if (b.quaternion) {
+        const Eigen::Matrix<double, 4, 3> P = QuaternionPlusJacobian(b.data);
+        R_.middleRows<3>(row).noalias() = P.transpose() * H_ambient_.middleRows<4>(a);
+        Jtr.segment<3>(row).noalias() = P.transpose() * g_ambient_.segment<4>(a);
+      } else {
+        R_.middleRows(row, b.size) = H_ambient_.middleRows(a, b.size);
+        Jtr.segment(row, b.size) = g_ambient_.segment(a, b.size);
+      }
+      a += b.size;
+      row += b.tangent;
+    }
+    JtJ_.resize(static_cast<size_t>(t) * t);
+    // Column-major t x t; symmetric, so Scatter may read it as row-major.
+    Eigen::Map<Eigen::MatrixXd> JtJ(JtJ_.data(), t, t);
+    a = 0;
+    int col = 0;
+    for (int i : res.blocks) {
+      const Block& b = blocks_[i];
+      if (!b.constant) {
+        if (b.quaternion) {
+          JtJ.middleCols<3>(col).noalias() = R_.middleCols<4>(a) * QuaternionPlusJacobian(b.data);
+        } else {
+          JtJ.middleCols(col, b.size) = R_.middleCols(a, b.size);
+        }
+        col += b.tangent;
+      }
+      a += b.size;
+    }
+    return Scatter(t, g, H);
+  }
+
+  // g += Jtr_ and H += JtJ_ (its upper triangle, row-major t x t) at the
+  // blocks' offsets (global_).
+  bool Scatter(int t, Eigen::VectorXd* g, Eigen::MatrixXd* H) {
     for (int a = 0; a < t; ++a) {
       if (!std::isfinite(Jtr_[a])) return false;
       (*g)[global_[a]] += Jtr_[a];
@@ -223,6 +297,8 @@ class BlockLmProblem::Evaluator {
   std::vector<double> jac_;  // the cost's Jacobians, block after block
   std::vector<int> global_;  // tangent column -> index in g and H
   std::vector<double> J_, JtJ_, Jtr_;
+  Eigen::VectorXd g_ambient_;  // a NormalEquationsCost's outputs
+  Eigen::MatrixXd H_ambient_, R_;
 };
 
 // The blocks' values, to undo a rejected step.

@@ -25,6 +25,9 @@
 // the left: q [+] d = Exp(d) q with d a rotation vector (rad). The damping
 // D is invariant to the tangent's scale, so this takes the same steps as
 // ceres::EigenQuaternionManifold (whose tangent is half the angle).
+//
+// A residual block that is a NormalEquationsCost gives its J^T J and J^T r
+// itself instead of its Jacobian (below); the solve is the same.
 #pragma once
 
 #include <memory>
@@ -37,6 +40,25 @@
 #include "core/common/status.h"
 
 namespace slapse {
+
+// A cost whose many residuals depend on the parameters only through a few
+// intermediate values (the window refiner's plane transfer: a block's ~100
+// macroblocks through one 3x3 homography) can form its normal equations from
+// the intermediates' small normal matrix, J^T J = D^T (A^T A) D with
+// A = dr/dh and D = dh/dp, which is much cheaper than the m x p Jacobian and
+// its rank update. BlockLmProblem then calls EvaluateNormalEquations where it
+// needs the Jacobian; Evaluate still serves the cost alone.
+class NormalEquationsCost : public ceres::CostFunction {
+ public:
+  // At `parameters`: *half_squared_norm = 1/2 |r|^2, *gradient = J^T r and
+  // *normal = J^T J (symmetric), over the ambient coordinates of all the
+  // parameter blocks in order (a quaternion's four), p = the sum of the
+  // block sizes; the outputs are resized to p. False exactly where Evaluate
+  // would fail.
+  virtual bool EvaluateNormalEquations(double const* const* parameters, double* half_squared_norm,
+                                       Eigen::VectorXd* gradient,
+                                       Eigen::MatrixXd* normal) const = 0;
+};
 
 struct BlockLmOptions {
   int max_iterations = 50;
@@ -92,7 +114,8 @@ class BlockLmProblem {
   };
   struct Residual {
     std::unique_ptr<ceres::CostFunction> cost;
-    std::vector<int> blocks;  // indices into blocks_
+    const NormalEquationsCost* normal = nullptr;  // cost, when it is one
+    std::vector<int> blocks;                      // indices into blocks_
   };
   class Evaluator;
 

@@ -16,28 +16,32 @@ PlaneTransferCost::PlaneTransferCost(PlaneTransferData data) : data_(std::move(d
   for (int size : kBlockSizes) mutable_parameter_block_sizes()->push_back(size);
 }
 
+void PlaneTransferCost::HomographyAndJacobian(double const* const* parameters, Eigen::Matrix3d* H,
+                                              HomographyJacobian* dH) const {
+  Jet p[kNumParameters];
+  const Jet* blocks[5];
+  for (int b = 0, offset = 0; b < 5; offset += kBlockSizes[b], ++b) {
+    for (int i = 0; i < kBlockSizes[b]; ++i) p[offset + i] = Jet(parameters[b][i], offset + i);
+    blocks[b] = p + offset;
+  }
+  const Eigen::Matrix<Jet, 3, 3> H_jet =
+      data_.Homography(blocks[0], blocks[1], blocks[2], blocks[3], blocks[4]);
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) {
+      (*H)(r, c) = H_jet(r, c).a;
+      dH->row(3 * r + c) = H_jet(r, c).v.transpose();
+    }
+  }
+}
+
 bool PlaneTransferCost::Evaluate(double const* const* parameters, double* residuals,
                                  double** jacobians) const {
-  // H and, when asked for, dH/dp (row 3 r + c of dH is H(r, c)'s gradient).
   Eigen::Matrix3d H;
-  Eigen::Matrix<double, 9, kNumParameters, Eigen::RowMajor> dH;
+  HomographyJacobian dH;
   if (jacobians == nullptr) {
     H = data_.Homography(parameters[0], parameters[1], parameters[2], parameters[3], parameters[4]);
   } else {
-    Jet p[kNumParameters];
-    const Jet* blocks[5];
-    for (int b = 0, offset = 0; b < 5; offset += kBlockSizes[b], ++b) {
-      for (int i = 0; i < kBlockSizes[b]; ++i) p[offset + i] = Jet(parameters[b][i], offset + i);
-      blocks[b] = p + offset;
-    }
-    const Eigen::Matrix<Jet, 3, 3> H_jet =
-        data_.Homography(blocks[0], blocks[1], blocks[2], blocks[3], blocks[4]);
-    for (int r = 0; r < 3; ++r) {
-      for (int c = 0; c < 3; ++c) {
-        H(r, c) = H_jet(r, c).a;
-        dH.row(3 * r + c) = H_jet(r, c).v.transpose();
-      }
-    }
+    HomographyAndJacobian(parameters, &H, &dH);
   }
   for (size_t j = 0; j < data_.mbs.size(); ++j) {
     const PlaneTransferData::Mb& mb = data_.mbs[j];
@@ -65,6 +69,52 @@ bool PlaneTransferCost::Evaluate(double const* const* parameters, double* residu
       }
     }
   }
+  return true;
+}
+
+bool PlaneTransferCost::EvaluateNormalEquations(double const* const* parameters,
+                                                double* half_squared_norm,
+                                                Eigen::VectorXd* gradient,
+                                                Eigen::MatrixXd* normal) const {
+  Eigen::Matrix3d H;
+  HomographyJacobian dH;
+  HomographyAndJacobian(parameters, &H, &dH);
+  // N's blocks (H's rows 0, 1, 2): W00, W02, W11, W12, W22; N01 = 0.
+  Eigen::Matrix3d W00 = Eigen::Matrix3d::Zero(), W02 = W00, W11 = W00, W12 = W00, W22 = W00;
+  Eigen::Vector3d G0 = Eigen::Vector3d::Zero(), G1 = G0, G2 = G0;
+  double sq = 0;
+  for (const PlaneTransferData::Mb& mb : data_.mbs) {
+    double r[2];
+    if (!data_.Residual(H, mb, r)) return false;
+    const Eigen::Vector3d& y = mb.ray;
+    const Eigen::Vector3d X = H * y;
+    const double inv_z = 1.0 / X.z();
+    const double a = mb.scale * data_.fx * inv_z, b = -a * X.x() * inv_z;
+    const double c = mb.scale * data_.fy * inv_z, d = -c * X.y() * inv_z;
+    const Eigen::Matrix3d yy = y * y.transpose();
+    W00.noalias() += (a * a) * yy;
+    W02.noalias() += (a * b) * yy;
+    W11.noalias() += (c * c) * yy;
+    W12.noalias() += (c * d) * yy;
+    W22.noalias() += (b * b + d * d) * yy;
+    G0.noalias() += (a * r[0]) * y;
+    G1.noalias() += (c * r[1]) * y;
+    G2.noalias() += (b * r[0] + d * r[1]) * y;
+    sq += r[0] * r[0] + r[1] * r[1];
+  }
+  Eigen::Matrix<double, 9, 9> N = Eigen::Matrix<double, 9, 9>::Zero();
+  N.block<3, 3>(0, 0) = W00;
+  N.block<3, 3>(0, 6) = W02;
+  N.block<3, 3>(6, 0) = W02.transpose();
+  N.block<3, 3>(3, 3) = W11;
+  N.block<3, 3>(3, 6) = W12;
+  N.block<3, 3>(6, 3) = W12.transpose();
+  N.block<3, 3>(6, 6) = W22;
+  Eigen::Matrix<double, 9, 1> G;
+  G << G0, G1, G2;
+  *half_squared_norm = 0.5 * sq;
+  *gradient = dH.transpose() * G;
+  *normal = dH.transpose() * (N * dH);
   return true;
 }
 
