@@ -24,10 +24,20 @@ bool ResidualAt(const Intrinsics& k, const Eigen::Matrix3d& Rt, const Eigen::Vec
   *residual =
       Eigen::Vector2d(k.fx_px * X.x() * iz + k.cx_px, k.fy_px * X.y() * iz + k.cy_px) - obs.x_px;
   if (jacobian != nullptr) {
-    Eigen::Matrix<double, 2, 3> dpi;
-    dpi << k.fx_px * iz, 0, -k.fx_px * X.x() * iz * iz, 0, k.fy_px * iz, -k.fy_px * X.y() * iz * iz;
-    jacobian->leftCols<3>() = dpi * Skew(X);  // dX_c/dtheta = [X_c]_x
-    jacobian->rightCols<3>() = -dpi * Rt;     // dX_c/dt = -R^T
+    // dpi = d(projection)/dX_c = [a 0 b; 0 c d]; dX_c/dtheta = [X_c]_x and
+    // dX_c/dt = -R^T, multiplied out (dpi [X_c]_x has rows a [X]_x.row(0) +
+    // b [X]_x.row(2) and c [X]_x.row(1) + d [X]_x.row(2)).
+    const double a = k.fx_px * iz, b = -a * X.x() * iz;
+    const double c = k.fy_px * iz, d = -c * X.y() * iz;
+    auto& J = *jacobian;
+    J(0, 0) = -b * X.y();
+    J(0, 1) = b * X.x() - a * X.z();
+    J(0, 2) = a * X.y();
+    J(1, 0) = c * X.z() - d * X.y();
+    J(1, 1) = d * X.x();
+    J(1, 2) = -c * X.x();
+    J.block<1, 3>(0, 3) = -(a * Rt.row(0) + b * Rt.row(2));
+    J.block<1, 3>(1, 3) = -(c * Rt.row(1) + d * Rt.row(2));
   }
   return true;
 }
@@ -48,6 +58,10 @@ NormalEquations DataTerm(const Intrinsics& k, const std::vector<FramePoseObserva
   if (median_depth) depths.reserve(obs.size());
   const double extra2 = o.extra_sigma_px * o.extra_sigma_px;
   const Eigen::Matrix3d Rt = pose.R().transpose();
+  // The rows sqrt(w / s2) J and sqrt(w / s2) r of the weighted observations.
+  Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor> A(2 * obs.size(), 6);
+  Eigen::VectorXd b(2 * obs.size());
+  Eigen::Index rows = 0;
   for (const FramePoseObservation& ob : obs) {
     Eigen::Vector2d r;
     Eigen::Matrix<double, 2, 6> J;
@@ -55,11 +69,17 @@ NormalEquations DataTerm(const Intrinsics& k, const std::vector<FramePoseObserva
     const double s2 = ob.variance_px2 + extra2;
     const double e = r.norm() / std::sqrt(s2);  // normalised residual
     const double w = e <= o.huber_k ? 1.0 : o.huber_k / e;
-    ne.H.noalias() += (w / s2) * J.transpose() * J;
-    ne.g.noalias() += (w / s2) * J.transpose() * r;
+    const double sqrt_w = std::sqrt(w / s2);
+    A.middleRows<2>(rows) = sqrt_w * J;
+    b.segment<2>(rows) = sqrt_w * r;
+    rows += 2;
     if (median_depth) depths.push_back(Rt.row(2).dot(ob.point_world - pose.translation));
     ++ne.used;
   }
+  // H = A^T A, g = A^T b over the weighted rows, in one symmetric rank update.
+  ne.H.selfadjointView<Eigen::Lower>().rankUpdate(A.topRows(rows).transpose());
+  ne.H.triangularView<Eigen::StrictlyUpper>() = ne.H.transpose();
+  ne.g.noalias() = A.topRows(rows).transpose() * b.head(rows);
   if (!depths.empty()) {
     std::nth_element(depths.begin(), depths.begin() + depths.size() / 2, depths.end());
     ne.median_depth = depths[depths.size() / 2];
