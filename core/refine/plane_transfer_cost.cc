@@ -7,7 +7,16 @@ namespace {
 
 constexpr int kBlockSizes[5] = {4, 3, 4, 3, 3};  // q_a, c_a, q_b, c_b, pi_r
 constexpr int kNumParameters = 17;
-using Jet = ceres::Jet<double, kNumParameters>;
+
+// dR/dq_i (i = x, y, z, w) of Eigen's Quaternion::toRotationMatrix (the
+// formula as written, which does not normalise q): each entry is linear in q.
+void RotationJacobian(const double* q, Eigen::Matrix3d dR[4]) {
+  const double x = 2 * q[0], y = 2 * q[1], z = 2 * q[2], w = 2 * q[3];
+  dR[0] << 0, y, z, y, -2 * x, -w, z, w, -2 * x;
+  dR[1] << -2 * y, x, w, x, 0, z, -w, z, -2 * y;
+  dR[2] << -2 * z, -w, x, w, -2 * z, y, x, y, 0;
+  dR[3] << 0, -z, y, z, 0, -x, -y, x, 0;
+}
 
 }  // namespace
 
@@ -16,21 +25,47 @@ PlaneTransferCost::PlaneTransferCost(PlaneTransferData data) : data_(std::move(d
   for (int size : kBlockSizes) mutable_parameter_block_sizes()->push_back(size);
 }
 
+// With u = R_rw^T pi_r, s = 1 - u . (c_b - c_wr), d = c_b - c_a, the
+// header's H is Ra^T Rb + t pi_b^T with t = Ra^T d and pi_b = Rb^T u / s.
+// Its derivatives (3 x 3 each, e_k the k-th unit vector, dR_i = dR/dq_i):
+//   q_a,i:  dRa_i^T (Rb + d pi_b^T)
+//   c_a,k:  -Ra^T e_k pi_b^T
+//   q_b,i:  (Ra^T + t u^T / s) dRb_i
+//   c_b,k:  (Ra^T e_k + t u_k / s) pi_b^T
+//   pi_r,k: t (Rb^T w_k + pi_b (w_k . (c_b - c_wr)))^T / s,  w_k = R_rw^T e_k.
+// refine_test checks them against automatic and numeric differentiation.
 void PlaneTransferCost::HomographyAndJacobian(double const* const* parameters, Eigen::Matrix3d* H,
                                               HomographyJacobian* dH) const {
-  Jet p[kNumParameters];
-  const Jet* blocks[5];
-  for (int b = 0, offset = 0; b < 5; offset += kBlockSizes[b], ++b) {
-    for (int i = 0; i < kBlockSizes[b]; ++i) p[offset + i] = Jet(parameters[b][i], offset + i);
-    blocks[b] = p + offset;
-  }
-  const Eigen::Matrix<Jet, 3, 3> H_jet =
-      data_.Homography(blocks[0], blocks[1], blocks[2], blocks[3], blocks[4]);
-  for (int r = 0; r < 3; ++r) {
-    for (int c = 0; c < 3; ++c) {
-      (*H)(r, c) = H_jet(r, c).a;
-      dH->row(3 * r + c) = H_jet(r, c).v.transpose();
+  const Eigen::Map<const Eigen::Quaterniond> qa(parameters[0]), qb(parameters[2]);
+  const Eigen::Map<const Eigen::Vector3d> ca(parameters[1]), cb(parameters[3]), pi_r(parameters[4]);
+  const Eigen::Matrix3d Ra = qa.toRotationMatrix(), Rb = qb.toRotationMatrix();
+  const Eigen::Vector3d u = data_.R_rw.transpose() * pi_r;
+  const Eigen::Vector3d f = cb - data_.c_wr;
+  const double s = 1.0 - u.dot(f);
+  const Eigen::Vector3d d = cb - ca;
+  const Eigen::Vector3d t = Ra.transpose() * d;
+  const Eigen::Vector3d pi_b = Rb.transpose() * u / s;
+  *H = Ra.transpose() * Rb + t * pi_b.transpose();
+  // Column p of dH (row-major 3 r + c) from a 3 x 3 derivative.
+  auto put = [dH](int p, const Eigen::Matrix3d& D) {
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) (*dH)(3 * r + c, p) = D(r, c);
     }
+  };
+  Eigen::Matrix3d dR[4];
+  RotationJacobian(parameters[0], dR);
+  const Eigen::Matrix3d M_b = Rb + d * pi_b.transpose();
+  for (int i = 0; i < 4; ++i) put(i, dR[i].transpose() * M_b);
+  for (int k = 0; k < 3; ++k) put(4 + k, -Ra.row(k).transpose() * pi_b.transpose());
+  RotationJacobian(parameters[2], dR);
+  const Eigen::Matrix3d N = Ra.transpose() + t * u.transpose() / s;
+  for (int i = 0; i < 4; ++i) put(7 + i, N * dR[i]);
+  for (int k = 0; k < 3; ++k) {
+    put(11 + k, (Ra.row(k).transpose() + t * (u[k] / s)) * pi_b.transpose());
+  }
+  for (int k = 0; k < 3; ++k) {
+    const Eigen::Vector3d w_k = data_.R_rw.row(k).transpose();
+    put(14 + k, t * ((Rb.transpose() * w_k + pi_b * w_k.dot(f)) / s).transpose());
   }
 }
 

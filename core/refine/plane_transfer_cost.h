@@ -16,9 +16,10 @@
 // macroblock with X_a.z <= 1e-9 (behind the earlier camera) makes the block
 // fail to evaluate.
 //
-// Jacobian (PlaneTransferCost): H and dH / d(17 parameters) by forward-mode
-// automatic differentiation once per block (the pose and plane algebra), then
-// per macroblock the chain rule in doubles:
+// Jacobian (PlaneTransferCost): H and dH / d(17 parameters) in closed form
+// once per block (plane_transfer_cost.cc; it was forward-mode automatic
+// differentiation, ~7x the instructions), then per macroblock the chain rule
+// in doubles:
 //   dX/dp = sum_k y_k dH_(.,k)/dp,
 //   dr_x/dp = s fx (dX.x/dp - (X.x / X.z) dX.z/dp) / X.z   (r_y alike with fy, X.y).
 // The Jacobians are with respect to the quaternions' four coordinates (Ceres
@@ -26,7 +27,7 @@
 //
 // Normal equations (EvaluateNormalEquations, what the refiner's solver uses):
 // r_j depends on p only through h = vec(H) (row-major, h_{3r+c} = H(r, c)),
-// so J = A D with D = dH/dp (9 x 17, from the autodiff above) and A_j =
+// so J = A D with D = dH/dp (9 x 17, above) and A_j =
 // dr_j/dh, whose rows are, with y = y_j, X = X_a, a = s fx / X.z,
 // b = -a X.x / X.z, c = s fy / X.z, d = -c X.y / X.z:
 //   dr_x/dh = [a y^T, 0, b y^T],   dr_y/dh = [0, c y^T, d y^T].
