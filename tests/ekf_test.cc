@@ -95,6 +95,73 @@ TEST(EkfJacobians, ObservationMatchesFiniteDifferences) {
   }
 }
 
+// The update's per-plane sums, formed through G = K (R + t pi^T)
+// (PlaneMeasurementSums), against the same sums from ObservePoint's
+// Jacobians MB by MB, with Huber weights active on a few gross outliers and
+// an MB whose plane point lies behind the camera (skipped by both).
+TEST(EkfJacobians, PlaneMeasurementSumsEqualThoseOfObservePoint) {
+  Fixture fx;
+  const Eigen::Matrix3d K = fx.K.K(), K_inv = K.inverse();
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> ux(40, 600), uy(40, 440);
+  std::normal_distribution<double> noise(0, 0.7);
+  PlaneObservation obs;
+  for (int j = 0; j < 80; ++j) {
+    const Eigen::Vector2d x(ux(rng), uy(rng));
+    Eigen::Vector2d z;
+    if (!PlaneEkf::ObservePoint(K, K_inv, fx.R, fx.t, fx.pi, x, &z, nullptr, nullptr, nullptr)) {
+      continue;
+    }
+    z += Eigen::Vector2d(noise(rng), noise(rng)) +
+         (j % 10 == 0 ? Eigen::Vector2d(9, -7) : Eigen::Vector2d(0, 0));
+    obs.x_later_px.push_back(x);
+    obs.x_earlier_px.push_back(z);
+    obs.variance_px2.push_back(0.2 + 0.01 * j);
+  }
+  // A pixel whose ray meets the plane behind the camera: pi . (-1, 0, 1) < 0.
+  obs.x_later_px.push_back((K * Eigen::Vector3d(-1, 0, 1)).hnormalized());
+  obs.x_earlier_px.push_back(Eigen::Vector2d(320, 240));
+  obs.variance_px2.push_back(0.3);
+  const double extra = 0.5, huber_k = 2.0;
+
+  Eigen::Matrix<double, 9, 9> JtJ = Eigen::Matrix<double, 9, 9>::Zero();
+  Eigen::Matrix<double, 9, 1> Jtr = Eigen::Matrix<double, 9, 1>::Zero();
+  double sq_sum = 0;
+  int count = 0, downweighted = 0;
+  for (size_t j = 0; j < obs.x_later_px.size(); ++j) {
+    Eigen::Vector2d z;
+    Eigen::Matrix<double, 2, 3> d_theta, d_t, d_pi;
+    if (!PlaneEkf::ObservePoint(K, K_inv, fx.R, fx.t, fx.pi, obs.x_later_px[j], &z, &d_theta, &d_t,
+                                &d_pi)) {
+      continue;
+    }
+    Eigen::Matrix<double, 2, 9> J;
+    J << d_theta, d_t, d_pi;
+    const Eigen::Vector2d r = obs.x_earlier_px[j] - z;
+    const double var = obs.variance_px2[j] + extra * extra;
+    double w = 1.0 / var;
+    const double e = r.norm() / std::sqrt(var);
+    if (e > huber_k) {
+      w *= huber_k / e;
+      ++downweighted;
+    }
+    JtJ += w * J.transpose() * J;
+    Jtr += w * J.transpose() * r;
+    sq_sum += r.squaredNorm();
+    ++count;
+  }
+  ASSERT_GE(count, 60);
+  ASSERT_LT(count, static_cast<int>(obs.x_later_px.size()));  // the one behind is skipped
+  ASSERT_GE(downweighted, 5);
+  const PlaneEkf::MeasurementSums m =
+      PlaneEkf::PlaneMeasurementSums(K, K_inv, fx.R, fx.t, fx.pi, obs, extra, huber_k);
+  EXPECT_EQ(m.count, count);
+  EXPECT_NEAR(m.sq_sum, sq_sum, 1e-9 * sq_sum);
+  EXPECT_LT((m.JtJ - JtJ).norm(), 1e-9 * JtJ.norm()) << m.JtJ << "\n\n" << JtJ;
+  EXPECT_LT((m.Jtr - Jtr).norm(), 1e-9 * Jtr.norm()) << m.Jtr.transpose() << "\n"
+                                                     << Jtr.transpose();
+}
+
 TEST(EkfJacobians, RoadHeightChangeMatchesFiniteDifferences) {
   Fixture fx;
   const Eigen::Vector3d road_pi(0.01, 0.66, -0.03);

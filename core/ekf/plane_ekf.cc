@@ -531,45 +531,93 @@ void PlaneEkf::GateAssociation(Association* a, UpdateReport* rep) {
 //   relative to the height),
 // a scalar pseudo-measurement with dc/dt = pi_road^T, dc/dpi_road = t^T.
 // It holds while the road is coasting too (PlaneTrack::missed_updates).
+PlaneEkf::MeasurementSums PlaneEkf::PlaneMeasurementSums(
+    const Eigen::Matrix3d& K, const Eigen::Matrix3d& K_inv, const Eigen::Matrix3d& R,
+    const Eigen::Vector3d& t, const Eigen::Vector3d& pi, const PlaneObservation& obs,
+    double extra_sigma_px, double huber_k) {
+  MeasurementSums out;
+  const double extra2 = extra_sigma_px * extra_sigma_px;
+  // N's blocks over G's rows 0, 1, 2 (N01 = 0), and sum_j w_j A_j^T r_j.
+  Eigen::Matrix3d W00 = Eigen::Matrix3d::Zero(), W02 = W00, W11 = W00, W12 = W00, W22 = W00;
+  Eigen::Vector3d g0 = Eigen::Vector3d::Zero(), g1 = g0, g2 = g0;
+  for (size_t j = 0; j < obs.x_later_px.size(); ++j) {
+    // ObservePoint's prediction and its two rejections.
+    const Eigen::Vector3d p = K_inv * obs.x_later_px[j].homogeneous();
+    const double inv_depth = pi.dot(p);
+    if (inv_depth <= 0) continue;
+    const Eigen::Vector3d q = R * p + t * inv_depth;
+    const Eigen::Vector3d u = K * q;
+    if (u.z() <= 1e-9 * q.norm()) continue;
+    const Eigen::Vector2d r = obs.x_earlier_px[j] - u.hnormalized();
+    const double var = obs.variance_px2[j] + extra2;
+    double w = 1.0 / var;
+    const double norm_r = r.norm() / std::sqrt(var);
+    if (huber_k > 0 && norm_r > huber_k) w *= huber_k / norm_r;
+    const double iz = 1.0 / u.z();
+    const double a = iz, b = -u.x() * iz * iz, d = -u.y() * iz * iz;  // c = a
+    const Eigen::Matrix3d pp = p * p.transpose();
+    W00.noalias() += (w * a * a) * pp;
+    W02.noalias() += (w * a * b) * pp;
+    W11.noalias() += (w * a * a) * pp;
+    W12.noalias() += (w * a * d) * pp;
+    W22.noalias() += (w * (b * b + d * d)) * pp;
+    g0.noalias() += (w * a * r.x()) * p;
+    g1.noalias() += (w * a * r.y()) * p;
+    g2.noalias() += (w * (b * r.x() + d * r.y())) * p;
+    out.sq_sum += r.squaredNorm();
+    ++out.count;
+  }
+  Eigen::Matrix<double, 9, 9> N = Eigen::Matrix<double, 9, 9>::Zero();
+  N.block<3, 3>(0, 0) = W00;
+  N.block<3, 3>(0, 6) = W02;
+  N.block<3, 3>(6, 0) = W02.transpose();
+  N.block<3, 3>(3, 3) = W11;
+  N.block<3, 3>(3, 6) = W12;
+  N.block<3, 3>(6, 3) = W12.transpose();
+  N.block<3, 3>(6, 6) = W22;
+  Eigen::Matrix<double, 9, 1> g;
+  g << g0, g1, g2;
+  // D: column k of each 3-column group is vec (row-major) of the derivative of G.
+  Eigen::Matrix<double, 9, 9> D;
+  const Eigen::Matrix3d KR = K * R;
+  const Eigen::Vector3d Kt = K * t;
+  for (int k = 0; k < 3; ++k) {
+    const Eigen::Matrix3d dG_theta = KR * Skew(Eigen::Vector3d::Unit(k));
+    const Eigen::Matrix3d dG_t = K.col(k) * pi.transpose();
+    Eigen::Matrix3d dG_pi = Eigen::Matrix3d::Zero();
+    dG_pi.col(k) = Kt;
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) {
+        D(3 * r + c, k) = dG_theta(r, c);
+        D(3 * r + c, 3 + k) = dG_t(r, c);
+        D(3 * r + c, 6 + k) = dG_pi(r, c);
+      }
+    }
+  }
+  out.JtJ = D.transpose() * N * D;
+  out.Jtr = D.transpose() * g;
+  return out;
+}
+
 void PlaneEkf::AccumulateMeasurements(const std::vector<TrackedObservation>& tracked,
                                       Eigen::MatrixXd* info_out, Eigen::VectorXd* rhs_out,
                                       double* sq_sum, int* count) const {
   Eigen::MatrixXd& info = *info_out;
   Eigen::VectorXd& rhs = *rhs_out;
-  const double extra2 = options_.extra_sigma_px * options_.extra_sigma_px;
-  // Each plane's sums are kept in fixed-size 9x9 / 9x1 accumulators and added
-  // into the dynamic system once per plane (not per macroblock).
+  // Each plane's sums are formed in fixed size (PlaneMeasurementSums) and
+  // added into the dynamic system once per plane.
   for (const auto& [index, obs] : tracked) {
-    Eigen::Matrix<double, 9, 9> JtJ = Eigen::Matrix<double, 9, 9>::Zero();
-    Eigen::Matrix<double, 9, 1> Jtr = Eigen::Matrix<double, 9, 1>::Zero();
-    for (size_t j = 0; j < obs->x_later_px.size(); ++j) {
-      Eigen::Vector2d z;
-      Eigen::Matrix<double, 2, 9> J;
-      Eigen::Matrix<double, 2, 3> d_theta, d_t, d_pi;
-      if (!ObservePoint(K_, K_inv_, R_, t_, planes_[index].pi, obs->x_later_px[j], &z, &d_theta,
-                        &d_t, &d_pi)) {
-        continue;
-      }
-      J << d_theta, d_t, d_pi;
-      const Eigen::Vector2d r = obs->x_earlier_px[j] - z;
-      const double var = obs->variance_px2[j] + extra2;
-      double w = 1.0 / var;
-      const double norm_r = r.norm() / std::sqrt(var);
-      if (options_.huber_k > 0 && norm_r > options_.huber_k) w *= options_.huber_k / norm_r;
-      // lazyProduct: as in MedianInnovation.
-      const Eigen::Matrix<double, 9, 2> wJt = w * J.transpose();
-      JtJ.noalias() += wJt.lazyProduct(J);
-      Jtr.noalias() += wJt * r;
-      *sq_sum += r.squaredNorm();
-      ++*count;
-    }
+    const MeasurementSums m = PlaneMeasurementSums(K_, K_inv_, R_, t_, planes_[index].pi, *obs,
+                                                   options_.extra_sigma_px, options_.huber_k);
+    *sq_sum += m.sq_sum;
+    *count += m.count;
     const int o = PlaneOffset(index);
-    info.block<6, 6>(kTheta, kTheta) += JtJ.topLeftCorner<6, 6>();
-    info.block<6, 3>(kTheta, o) += JtJ.topRightCorner<6, 3>();
-    info.block<3, 6>(o, kTheta) += JtJ.bottomLeftCorner<3, 6>();
-    info.block<3, 3>(o, o) += JtJ.bottomRightCorner<3, 3>();
-    rhs.segment<6>(kTheta) += Jtr.head<6>();
-    rhs.segment<3>(o) += Jtr.tail<3>();
+    info.block<6, 6>(kTheta, kTheta) += m.JtJ.topLeftCorner<6, 6>();
+    info.block<6, 3>(kTheta, o) += m.JtJ.topRightCorner<6, 3>();
+    info.block<3, 6>(o, kTheta) += m.JtJ.bottomLeftCorner<3, 6>();
+    info.block<3, 3>(o, o) += m.JtJ.bottomRightCorner<3, 3>();
+    rhs.segment<6>(kTheta) += m.Jtr.head<6>();
+    rhs.segment<3>(o) += m.Jtr.tail<3>();
   }
   if (const int road = RoadIndex(); road >= 0 && options_.road_height_rel_sigma > 0) {
     const int o = PlaneOffset(static_cast<size_t>(road));

@@ -242,6 +242,31 @@ class PlaneEkf {
                            Eigen::Vector2d* x_earlier, Eigen::Matrix<double, 2, 3>* d_theta,
                            Eigen::Matrix<double, 2, 3>* d_t, Eigen::Matrix<double, 2, 3>* d_pi);
 
+  // One plane observation's measurement terms at (R, t, pi), as the update
+  // adds them (file comment): with J_j = dz_j / d[dtheta, t, pi] (2 x 9,
+  // ObservePoint's), r_j = x_earlier_j - z_j and w_j = h_j / s_j^2 (s_j^2 =
+  // variance + extra_sigma_px^2, h_j the Huber weight at huber_k of
+  // |r_j| / s_j; huber_k <= 0: none), JtJ = sum_j w_j J_j^T J_j and Jtr =
+  // sum_j w_j J_j^T r_j over the MBs ObservePoint accepts (count of them,
+  // sq_sum = sum |r_j|^2). Formed through G = K (R + t pi^T), on which z_j
+  // depends alone: J_j = A_j D with D = d vec(G) / d[dtheta, t, pi] (9 x 9,
+  // columns K R [e_k]x, K e_k pi^T, K t e_k^T) and A_j = dz_j / d vec(G)
+  // (rows [p^T / u_z, 0, -u_x p^T / u_z^2] and [0, p^T / u_z, -u_y p^T /
+  // u_z^2], u = G p), so per MB only A_j^T A_j's 3 x 3 blocks of p p^T are
+  // summed, and JtJ = D^T (sum_j w_j A_j^T A_j) D.
+  struct MeasurementSums {
+    Eigen::Matrix<double, 9, 9> JtJ = Eigen::Matrix<double, 9, 9>::Zero();
+    Eigen::Matrix<double, 9, 1> Jtr = Eigen::Matrix<double, 9, 1>::Zero();
+    double sq_sum = 0.0;
+    int count = 0;
+  };
+  static MeasurementSums PlaneMeasurementSums(const Eigen::Matrix3d& K,
+                                              const Eigen::Matrix3d& K_inv,
+                                              const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
+                                              const Eigen::Vector3d& pi,
+                                              const PlaneObservation& obs, double extra_sigma_px,
+                                              double huber_k);
+
   // The road's height change over a step relative to the height (the
   // road_height_rel_sigma pseudo-measurement, 0 when the step moves along the
   // road): c = pi_road^T t, with dc/dt = pi_road^T and dc/dpi_road = t^T.
