@@ -426,21 +426,30 @@ TEST(WindowRefinerTest, OptionsCheck) {
 // differentiation of the same residual and against central finite
 // differences, on the four quaternion coordinates as Ceres sees them, with
 // some parameter blocks constant (no Jacobian asked for).
+// A plane-transfer block with the window's oldest camera at TruePose(r) and
+// `n` macroblocks at random rays and earlier pixels, weights in [0.1, 0.9].
+PlaneTransferData RandomTransferData(int r, int n, double fy, std::mt19937* rng) {
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  PlaneTransferData data;
+  data.fx = 457.0;
+  data.fy = fy;
+  data.cx = 319.5;
+  data.cy = 239.5;
+  const Rigid3d world_from_r = TruePose(r);
+  data.R_rw = world_from_r.R().transpose();
+  data.c_wr = world_from_r.translation;
+  for (int j = 0; j < n; ++j) {
+    const Eigen::Vector3d ray(0.6 * u(*rng), 0.4 * u(*rng), 1.0);
+    const Eigen::Vector2d x_earlier(320 + 200 * u(*rng), 240 + 150 * u(*rng));
+    data.mbs.push_back({ray, x_earlier, 0.5 + 0.4 * u(*rng)});
+  }
+  return data;
+}
+
 TEST(PlaneTransferCostTest, JacobianMatchesAutoDiffAndFiniteDifferences) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
-  PlaneTransferData data;
-  data.fx = data.fy = 457.0;
-  data.cx = 319.5;
-  data.cy = 239.5;
-  const Rigid3d world_from_r = TruePose(2);
-  data.R_rw = world_from_r.R().transpose();
-  data.c_wr = world_from_r.translation;
-  for (int j = 0; j < 12; ++j) {
-    data.mbs.push_back({Eigen::Vector3d(0.6 * u(rng), 0.4 * u(rng), 1.0),
-                        Eigen::Vector2d(320 + 200 * u(rng), 240 + 150 * u(rng)),
-                        0.5 + 0.4 * u(rng)});
-  }
+  PlaneTransferData data = RandomTransferData(2, 12, 457.0, &rng);
   // Earlier / later anchors 3 and 4, perturbed; a wall 5 m to the left in r.
   const Rigid3d pa = TruePose(3), pb = TruePose(4);
   Eigen::Quaterniond qa = pa.rotation, qb = pb.rotation;
@@ -503,48 +512,28 @@ TEST(PlaneTransferCostTest, JacobianMatchesAutoDiffAndFiniteDifferences) {
 // The normal equations the refiner's solver takes from PlaneTransferCost
 // (J^T J = D^T N D, J^T r = D^T G, plane_transfer_cost.h) against J^T J and
 // J^T r formed from its Jacobian (checked above against autodiff and finite
-// differences), on 60 macroblocks of varied weight.
+// differences), on 60 macroblocks of varied weight and fx != fy.
 TEST(PlaneTransferCostTest, NormalEquationsEqualThoseOfTheJacobian) {
   std::mt19937 rng(11);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
-  PlaneTransferData data;
-  data.fx = 457.0;
-  data.fy = 455.0;
-  data.cx = 319.5;
-  data.cy = 239.5;
-  const Rigid3d world_from_r = TruePose(1);
-  data.R_rw = world_from_r.R().transpose();
-  data.c_wr = world_from_r.translation;
-  for (int j = 0; j < 60; ++j) {
-    data.mbs.push_back({Eigen::Vector3d(0.6 * u(rng), 0.4 * u(rng), 1.0),
-                        Eigen::Vector2d(320 + 200 * u(rng), 240 + 150 * u(rng)),
-                        0.2 + 0.8 * std::abs(u(rng))});
-  }
+  PlaneTransferData data = RandomTransferData(1, 60, 455.0, &rng);
   const Rigid3d pa = TruePose(2), pb = TruePose(3);
   Eigen::Quaterniond qa = pa.rotation, qb = pb.rotation;
   qb.coeffs() += 0.01 * Eigen::Vector4d(u(rng), u(rng), u(rng), u(rng));
   Eigen::Vector3d ca = pa.translation, cb = pb.translation + Eigen::Vector3d(0.03, -0.02, 0.04);
   Eigen::Vector3d pi(0.01, -0.6, 0.02);  // the road 1.6 m below r
-  std::vector<double*> blocks = {qa.coeffs().data(), ca.data(), qb.coeffs().data(), cb.data(),
-                                 pi.data()};
-  const int sizes[5] = {4, 3, 4, 3, 3};
-  const int n = 2 * static_cast<int>(data.mbs.size());
+  const std::vector<double*> blocks = {qa.coeffs().data(), ca.data(), qb.coeffs().data(),
+                                       cb.data(), pi.data()};
   const PlaneTransferCost cost(data);
-  std::vector<double> r(n);
-  std::vector<std::vector<double>> jac(5);
-  std::vector<double*> jac_ptr(5);
-  for (int b = 0; b < 5; ++b) {
-    jac[b].assign(n * sizes[b], 0.0);
-    jac_ptr[b] = jac[b].data();
-  }
-  ASSERT_TRUE(cost.Evaluate(blocks.data(), r.data(), jac_ptr.data()));
+  // r and J (n x 17, the blocks' columns side by side) from Evaluate.
+  const int n = cost.num_residuals();
+  Eigen::VectorXd rv(n);
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> Jq_a(n, 4), Jc_a(n, 3),
+      Jq_b(n, 4), Jc_b(n, 3), Jpi(n, 3);
+  double* jac[5] = {Jq_a.data(), Jc_a.data(), Jq_b.data(), Jc_b.data(), Jpi.data()};
+  ASSERT_TRUE(cost.Evaluate(blocks.data(), rv.data(), jac));
   Eigen::MatrixXd J(n, 17);
-  for (int b = 0, offset = 0; b < 5; offset += sizes[b], ++b) {
-    for (int i = 0; i < n; ++i) {
-      for (int c = 0; c < sizes[b]; ++c) J(i, offset + c) = jac[b][i * sizes[b] + c];
-    }
-  }
-  const Eigen::Map<const Eigen::VectorXd> rv(r.data(), n);
+  J << Jq_a, Jc_a, Jq_b, Jc_b, Jpi;
   const Eigen::MatrixXd JtJ = J.transpose() * J;
   const Eigen::VectorXd Jtr = J.transpose() * rv;
 

@@ -10,6 +10,7 @@
 #include "core/common/angles.h"
 #include "core/common/road.h"
 #include "core/common/so3.h"
+#include "core/common/transfer_normal_sums.h"
 
 namespace slapse {
 namespace {
@@ -520,26 +521,14 @@ void PlaneEkf::GateAssociation(Association* a, UpdateReport* rep) {
   }
 }
 
-// One Gauss-Newton step's normal equations (file comment of plane_ekf.h):
-//   info += sum_j w_j J_j^T J_j,  rhs += sum_j w_j J_j^T r_j,
-// J_j = [dz/dtheta, dz/dt, dz/dpi] (2x9, only the motion and its plane's
-// columns), w_j = 1 / (s_j^2 + extra^2) times the Huber weight
-// min(1, huber_k / |r_j| sqrt(w_j)).
-// The road's constant height (road_height_rel_sigma): the camera stays at the
-// same distance above the road, so the step moves along it,
-//   c(t, pi_road) = pi_road^T t = 0  (n^T t / d: the step's height change
-//   relative to the height),
-// a scalar pseudo-measurement with dc/dt = pi_road^T, dc/dpi_road = t^T.
-// It holds while the road is coasting too (PlaneTrack::missed_updates).
+// See plane_ekf.h: the sums through G's 9 entries (core/common/transfer_normal_sums.h).
 PlaneEkf::MeasurementSums PlaneEkf::PlaneMeasurementSums(
     const Eigen::Matrix3d& K, const Eigen::Matrix3d& K_inv, const Eigen::Matrix3d& R,
     const Eigen::Vector3d& t, const Eigen::Vector3d& pi, const PlaneObservation& obs,
     double extra_sigma_px, double huber_k) {
   MeasurementSums out;
   const double extra2 = extra_sigma_px * extra_sigma_px;
-  // N's blocks over G's rows 0, 1, 2 (N01 = 0), and sum_j w_j A_j^T r_j.
-  Eigen::Matrix3d W00 = Eigen::Matrix3d::Zero(), W02 = W00, W11 = W00, W12 = W00, W22 = W00;
-  Eigen::Vector3d g0 = Eigen::Vector3d::Zero(), g1 = g0, g2 = g0;
+  TransferNormalSums sums;  // z_j = dehom(G p_j), e_j = r_j
   for (size_t j = 0; j < obs.x_later_px.size(); ++j) {
     // ObservePoint's prediction and its two rejections.
     const Eigen::Vector3d p = K_inv * obs.x_later_px[j].homogeneous();
@@ -553,30 +542,12 @@ PlaneEkf::MeasurementSums PlaneEkf::PlaneMeasurementSums(
     double w = 1.0 / var;
     const double norm_r = r.norm() / std::sqrt(var);
     if (huber_k > 0 && norm_r > huber_k) w *= huber_k / norm_r;
-    const double iz = 1.0 / u.z();
-    const double a = iz, b = -u.x() * iz * iz, d = -u.y() * iz * iz;  // c = a
-    const Eigen::Matrix3d pp = p * p.transpose();
-    W00.noalias() += (w * a * a) * pp;
-    W02.noalias() += (w * a * b) * pp;
-    W11.noalias() += (w * a * a) * pp;
-    W12.noalias() += (w * a * d) * pp;
-    W22.noalias() += (w * (b * b + d * d)) * pp;
-    g0.noalias() += (w * a * r.x()) * p;
-    g1.noalias() += (w * a * r.y()) * p;
-    g2.noalias() += (w * (b * r.x() + d * r.y())) * p;
+    sums.Add(p, u, 1.0, 1.0, r, w);
     out.sq_sum += r.squaredNorm();
     ++out.count;
   }
-  Eigen::Matrix<double, 9, 9> N = Eigen::Matrix<double, 9, 9>::Zero();
-  N.block<3, 3>(0, 0) = W00;
-  N.block<3, 3>(0, 6) = W02;
-  N.block<3, 3>(6, 0) = W02.transpose();
-  N.block<3, 3>(3, 3) = W11;
-  N.block<3, 3>(3, 6) = W12;
-  N.block<3, 3>(6, 3) = W12.transpose();
-  N.block<3, 3>(6, 6) = W22;
-  Eigen::Matrix<double, 9, 1> g;
-  g << g0, g1, g2;
+  const Eigen::Matrix<double, 9, 9> N = sums.N();
+  const Eigen::Matrix<double, 9, 1> g = sums.g();
   // D: column k of each 3-column group is vec (row-major) of the derivative of G.
   Eigen::Matrix<double, 9, 9> D;
   const Eigen::Matrix3d KR = K * R;
@@ -599,6 +570,17 @@ PlaneEkf::MeasurementSums PlaneEkf::PlaneMeasurementSums(
   return out;
 }
 
+// One Gauss-Newton step's normal equations (file comment of plane_ekf.h):
+//   info += sum_j w_j J_j^T J_j,  rhs += sum_j w_j J_j^T r_j,
+// J_j = [dz/dtheta, dz/dt, dz/dpi] (2x9, only the motion and its plane's
+// columns), w_j = 1 / (s_j^2 + extra^2) times the Huber weight
+// min(1, huber_k / |r_j| sqrt(w_j)).
+// The road's constant height (road_height_rel_sigma): the camera stays at the
+// same distance above the road, so the step moves along it,
+//   c(t, pi_road) = pi_road^T t = 0  (n^T t / d: the step's height change
+//   relative to the height),
+// a scalar pseudo-measurement with dc/dt = pi_road^T, dc/dpi_road = t^T.
+// It holds while the road is coasting too (PlaneTrack::missed_updates).
 void PlaneEkf::AccumulateMeasurements(const std::vector<TrackedObservation>& tracked,
                                       Eigen::MatrixXd* info_out, Eigen::VectorXd* rhs_out,
                                       double* sq_sum, int* count) const {

@@ -2,6 +2,8 @@
 
 #include <utility>
 
+#include "core/common/transfer_normal_sums.h"
+
 namespace slapse {
 namespace {
 
@@ -114,39 +116,17 @@ bool PlaneTransferCost::EvaluateNormalEquations(double const* const* parameters,
   Eigen::Matrix3d H;
   HomographyJacobian dH;
   HomographyAndJacobian(parameters, &H, &dH);
-  // N's blocks (H's rows 0, 1, 2): W00, W02, W11, W12, W22; N01 = 0.
-  Eigen::Matrix3d W00 = Eigen::Matrix3d::Zero(), W02 = W00, W11 = W00, W12 = W00, W22 = W00;
-  Eigen::Vector3d G0 = Eigen::Vector3d::Zero(), G1 = G0, G2 = G0;
+  TransferNormalSums sums;  // r_j = s_j (projection - x_earlier): axis scales s_j f
   double sq = 0;
   for (const PlaneTransferData::Mb& mb : data_.mbs) {
     double r[2];
     if (!data_.Residual(H, mb, r)) return false;
-    const Eigen::Vector3d& y = mb.ray;
-    const Eigen::Vector3d X = H * y;
-    const double inv_z = 1.0 / X.z();
-    const double a = mb.scale * data_.fx * inv_z, b = -a * X.x() * inv_z;
-    const double c = mb.scale * data_.fy * inv_z, d = -c * X.y() * inv_z;
-    const Eigen::Matrix3d yy = y * y.transpose();
-    W00.noalias() += (a * a) * yy;
-    W02.noalias() += (a * b) * yy;
-    W11.noalias() += (c * c) * yy;
-    W12.noalias() += (c * d) * yy;
-    W22.noalias() += (b * b + d * d) * yy;
-    G0.noalias() += (a * r[0]) * y;
-    G1.noalias() += (c * r[1]) * y;
-    G2.noalias() += (b * r[0] + d * r[1]) * y;
+    sums.Add(mb.ray, H * mb.ray, mb.scale * data_.fx, mb.scale * data_.fy,
+             Eigen::Vector2d(r[0], r[1]), 1.0);
     sq += r[0] * r[0] + r[1] * r[1];
   }
-  Eigen::Matrix<double, 9, 9> N = Eigen::Matrix<double, 9, 9>::Zero();
-  N.block<3, 3>(0, 0) = W00;
-  N.block<3, 3>(0, 6) = W02;
-  N.block<3, 3>(6, 0) = W02.transpose();
-  N.block<3, 3>(3, 3) = W11;
-  N.block<3, 3>(3, 6) = W12;
-  N.block<3, 3>(6, 3) = W12.transpose();
-  N.block<3, 3>(6, 6) = W22;
-  Eigen::Matrix<double, 9, 1> G;
-  G << G0, G1, G2;
+  const Eigen::Matrix<double, 9, 9> N = sums.N();
+  const Eigen::Matrix<double, 9, 1> G = sums.g();
   *half_squared_norm = 0.5 * sq;
   *gradient = dH.transpose() * G;
   *normal = dH.transpose() * (N * dH);
