@@ -522,8 +522,8 @@ TEST(PlaneTransferCostTest, NormalEquationsEqualThoseOfTheJacobian) {
   qb.coeffs() += 0.01 * Eigen::Vector4d(u(rng), u(rng), u(rng), u(rng));
   Eigen::Vector3d ca = pa.translation, cb = pb.translation + Eigen::Vector3d(0.03, -0.02, 0.04);
   Eigen::Vector3d pi(0.01, -0.6, 0.02);  // the road 1.6 m below r
-  const std::vector<double*> blocks = {qa.coeffs().data(), ca.data(), qb.coeffs().data(),
-                                       cb.data(), pi.data()};
+  const std::vector<double*> blocks = {qa.coeffs().data(), ca.data(), qb.coeffs().data(), cb.data(),
+                                       pi.data()};
   const PlaneTransferCost cost(data);
   // r and J (n x 17, the blocks' columns side by side) from Evaluate.
   const int n = cost.num_residuals();

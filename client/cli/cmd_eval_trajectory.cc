@@ -14,7 +14,6 @@
 
 #include <opencv2/core.hpp>
 
-#include "api/validate.h"
 #include "client/cli/commands.h"
 #include "client/cli/flags.h"
 #include "core/common/timing.h"
@@ -88,30 +87,7 @@ int RunEvalTrajectory(int argc, char** argv) {
       ->capture_default_str();
   app.add_flag("--fresh", fresh, "simulate again even if a drive is on disk");
   // Ablation of the pipeline's default (the struct's default shown).
-  app.add_option("--motion-only-steps", eo.pipeline.motion_only_steps,
-                 "track pairs with motion but no plane (PipelineOptions::motion_only_steps)")
-      ->type_name("BOOL")
-      ->capture_default_str();
-  app.add_option("--window-refine", eo.pipeline.window_refine,
-                 "sliding-window refinement of poses and planes (PipelineOptions::window_refine)")
-      ->type_name("BOOL")
-      ->capture_default_str();
-  app.add_option("--refine-window", eo.pipeline.refine.window_anchors,
-                 "anchors in the refinement window (WindowRefinerOptions::window_anchors)")
-      ->type_name("N")
-      ->capture_default_str();
-  app.add_option("--road-attitude-sigma-deg", eo.pipeline.refine.road_attitude_sigma_deg,
-                 "the refinement's prior on the road's attitude, per axis; 0 = off "
-                 "(WindowRefinerOptions::road_attitude_sigma_deg)")
-      ->type_name("DEG")
-      ->check(CLI::Range(0.0, api::kMaxRoadAttitudeSigmaDeg))
-      ->capture_default_str();
-  app.add_option("--min-pair-span-s", eo.pipeline.merge.min_pair_span_s,
-                 "IPPP streams: chain P frames until an anchor pair spans at least this long; "
-                 "0 = one pair per P frame (MergeOptions::min_pair_span_s)")
-      ->type_name("S")
-      ->check(CLI::Range(0.0, api::kMaxMinPairSpanS))
-      ->capture_default_str();
+  AddTrackingFlags(&cl, &eo.pipeline);
   app.add_option("--refine-extra-sigma-px", eo.pipeline.refine.extra_sigma_px,
                  "added in quadrature to each vector's variance in the refinement "
                  "(WindowRefinerOptions::extra_sigma_px)")

@@ -205,30 +205,7 @@ int RunRun(int argc, char** argv) {
   app.add_option("--steps-csv", steps_csv_path,
                  "also write one CSV row per anchor pair: its planes and the filter's")
       ->type_name("FILE");
-  app.add_option("--window-refine", po.window_refine,
-                 "sliding-window refinement of poses and planes (docs/METHOD.md)")
-      ->type_name("BOOL")
-      ->capture_default_str();
-  app.add_option("--refine-window", po.refine.window_anchors, "anchors in the refinement window")
-      ->type_name("N")
-      ->capture_default_str();
-  app.add_option("--road-attitude-sigma-deg", po.refine.road_attitude_sigma_deg,
-                 "the refinement's prior on the road's attitude in the camera, per axis; "
-                 "0 = off (docs/METHOD.md)")
-      ->type_name("DEG")
-      ->check(CLI::Range(0.0, api::kMaxRoadAttitudeSigmaDeg))
-      ->capture_default_str();
-  app.add_option("--motion-only-steps", po.motion_only_steps,
-                 "track pairs with motion but no plane from their rotation and direction "
-                 "(docs/METHOD.md)")
-      ->type_name("BOOL")
-      ->capture_default_str();
-  app.add_option("--min-pair-span-s", po.merge.min_pair_span_s,
-                 "IPPP streams: chain P frames until an anchor pair spans at least this long; "
-                 "0 = one pair per P frame (docs/METHOD.md)")
-      ->type_name("S")
-      ->check(CLI::Range(0.0, api::kMaxMinPairSpanS))
-      ->capture_default_str();
+  AddTrackingFlags(&cl, &po);
   app.add_option("--init-max-baseline-s", po.init_max_baseline_s,
                  "while waiting to initialise, extend a one-frame IPPP pair too short to decide "
                  "the motion by the next frames up to this span; 0 = off (docs/METHOD.md)")

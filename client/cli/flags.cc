@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <sstream>
 
+#include "api/validate.h"
 #include "client/cli/commands.h"
 #include "core/common/intrinsics_io.h"
 #include "server/server.h"
@@ -71,6 +72,36 @@ Status CheckRange(const std::string& name, int64_t v, int64_t min, int64_t max) 
   if (v >= min && v <= max) return Status::Ok();
   return InvalidArgumentError("--" + name + " must be in [" + std::to_string(min) + ", " +
                               std::to_string(max) + "], got " + std::to_string(v));
+}
+
+void AddTrackingFlags(CommandLine* command_line, PipelineOptions* options) {
+  CLI::App& app = command_line->app();
+  app.add_option("--window-refine", options->window_refine,
+                 "sliding-window refinement of poses and planes (PipelineOptions::window_refine, "
+                 "docs/METHOD.md)")
+      ->type_name("BOOL")
+      ->capture_default_str();
+  app.add_option("--refine-window", options->refine.window_anchors,
+                 "anchors in the refinement window (WindowRefinerOptions::window_anchors)")
+      ->type_name("N")
+      ->capture_default_str();
+  app.add_option("--road-attitude-sigma-deg", options->refine.road_attitude_sigma_deg,
+                 "the refinement's prior on the road's attitude in the camera, per axis; 0 = off "
+                 "(WindowRefinerOptions::road_attitude_sigma_deg)")
+      ->type_name("DEG")
+      ->check(CLI::Range(0.0, api::kMaxRoadAttitudeSigmaDeg))
+      ->capture_default_str();
+  app.add_option("--motion-only-steps", options->motion_only_steps,
+                 "track pairs with motion but no plane from their rotation and direction "
+                 "(PipelineOptions::motion_only_steps)")
+      ->type_name("BOOL")
+      ->capture_default_str();
+  app.add_option("--min-pair-span-s", options->merge.min_pair_span_s,
+                 "IPPP streams: chain P frames until an anchor pair spans at least this long; "
+                 "0 = one pair per P frame (MergeOptions::min_pair_span_s)")
+      ->type_name("S")
+      ->check(CLI::Range(0.0, api::kMaxMinPairSpanS))
+      ->capture_default_str();
 }
 
 void ScaleFlags::AddTo(CommandLine* command_line) {

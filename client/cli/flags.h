@@ -71,6 +71,12 @@ class ScaleFlags {
   double first_step_m_ = 0.0, speed_kmh_ = 0.0, camera_height_m_ = 0.0;
 };
 
+// The tracking flags shared by `run` and `eval-trajectory`, bound to
+// `options`: --window-refine, --refine-window, --road-attitude-sigma-deg,
+// --motion-only-steps and --min-pair-span-s (range-checked as the wire
+// options are, api/validate.h).
+void AddTrackingFlags(CommandLine* command_line, PipelineOptions* options);
+
 // Intrinsics for a width x height stream from an --intrinsics spec
 // (ParseIntrinsicsSpec), or, when `spec` is empty, from the simulator's
 // intrinsics.json beside `input`.
