@@ -7,10 +7,12 @@
 // (pair_motion.h) next to what the true motion gives for the same
 // correspondences (true_in: within ransac_threshold_px (Sampson) of the true
 // epipolar geometry; true_par: those of them off the true rotation by >=
-// tau_inf_px), to tell bad MVs from a bad decision.
-//   build/bench/motion_accuracy [--pairs] DRIVE_DIR [DRIVE_DIR ...]
+// tau_inf_px), to tell bad MVs from a bad decision. --prior-scan-seeds N sets
+// the fast path's PairMotionOptions::prior_scan_seeds (0: no scanned rotations).
+//   build/bench/motion_accuracy [--pairs] [--prior-scan-seeds N] DRIVE_DIR [DRIVE_DIR ...]
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <optional>
 #include <string>
 #include <vector>
@@ -30,13 +32,14 @@ double AngleDeg(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
 }
 
 struct Acc {
-  int n = 0, motion = 0, from_prior = 0;
+  int n = 0, motion = 0, from_prior = 0, scanned = 0;
   double sq_rot = 0, sq_dir = 0;
   void Add(const slapse::PairMotionReport& r, const slapse::Rigid3d& truth) {
     ++n;
     if (!r.has_motion) return;
     ++motion;
     from_prior += r.motion_from_prior;
+    scanned += r.prior_rotation_scanned;
     const double er = AngleDeg(r.later_from_earlier.R(), truth.R());
     const double et = slapse::AngleBetweenDeg(r.later_from_earlier.translation, truth.translation);
     sq_rot += er * er;
@@ -44,9 +47,9 @@ struct Acc {
   }
   void Print(const char* name) const {
     std::printf(
-        "  %-8s pairs %d, motion %d (from prior %d): rotation RMSE %.4f deg, "
-        "t direction RMSE %.3f deg\n",
-        name, n, motion, from_prior, std::sqrt(sq_rot / std::max(1, motion)),
+        "  %-8s pairs %d, motion %d (from prior %d, of them from a scanned rotation %d): "
+        "rotation RMSE %.4f deg, t direction RMSE %.3f deg\n",
+        name, n, motion, from_prior, scanned, std::sqrt(sq_rot / std::max(1, motion)),
         std::sqrt(sq_dir / std::max(1, motion)));
   }
 };
@@ -128,10 +131,15 @@ void PrintPair(const slapse::AnchorPair& pair, const slapse::PairMotionReport& r
 int main(int argc, char** argv) {
   Acc all_full, all_seeded;
   bool pairs = false;
+  int scan_seeds = slapse::PairMotionOptions().prior_scan_seeds;
   for (int a = 1; a < argc; ++a) {
     const std::string dir = argv[a];
     if (dir == "--pairs") {
       pairs = true;
+      continue;
+    }
+    if (dir == "--prior-scan-seeds" && a + 1 < argc) {
+      scan_seeds = std::atoi(argv[++a]);
       continue;
     }
     auto gt = slapse::LoadGroundTruth(dir);
@@ -140,7 +148,9 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "cannot read %s\n", dir.c_str());
       return 1;
     }
-    slapse::FrontEnd front_end(gt->intrinsics, (*reader)->info().mv_sigma_px());
+    slapse::FrontEndOptions front_end_options;
+    front_end_options.infinity.prior_scan_seeds = scan_seeds;
+    slapse::FrontEnd front_end(gt->intrinsics, (*reader)->info().mv_sigma_px(), front_end_options);
     const slapse::InfinityOptions options;
     Acc full, seeded;
     slapse::FrameRecord frame;

@@ -487,6 +487,78 @@ TEST(ThresholdInfinityTest, SeededFastPathFallsBack) {
   EXPECT_LT(RotationAngleDeg(result->later_from_earlier.R(), rot.later_from_earlier.R()), 0.05);
 }
 
+// A turn at a low frame rate: the prior's rotation is degrees off this
+// pair's, out of the refinement's reach, so the prior alone is refused. The
+// scanned rotations (PairMotionOptions::prior_scan_seeds) find the turn: the
+// fast path is taken from one of them, with the full fit's motion and
+// inliers, and the tracker's reference becomes this fit's share, as a full
+// fit's would. A turn beyond the scan still goes to the full path.
+TEST(ThresholdInfinityTest, ScannedRotationFollowsATurn) {
+  SceneNoise noise;
+  noise.seed = 10;
+  const SyntheticPair previous = MakePair(Frame0(), Frame1(), 0, noise);
+  const auto previous_fit = ThresholdInfinity(previous.pair.correspondences, TestIntrinsics(), {});
+  ASSERT_TRUE(previous_fit.ok() && previous_fit->has_motion);
+  PairMotionPriorTracker tracker;
+  tracker.Record(previous.pair, &*previous_fit);
+  const double ratio =
+      static_cast<double>(previous_fit->num_sampson_inliers) / previous.label.size();
+
+  const SyntheticPair s = MakePair(Frame1(), Frame2(), 1, noise);
+  const auto full = ThresholdInfinity(s.pair.correspondences, TestIntrinsics(), {});
+  ASSERT_TRUE(full.ok() && full->has_motion);
+  auto turned_prior = [&](double yaw_deg, double pitch_deg) {
+    PairMotionPrior prior;
+    prior.later_from_earlier = Rigid3d(
+        Eigen::AngleAxisd(yaw_deg * kDegToRad, Eigen::Vector3d::UnitY()).toRotationMatrix() *
+            Eigen::AngleAxisd(pitch_deg * kDegToRad, Eigen::Vector3d::UnitX()).toRotationMatrix() *
+            s.later_from_earlier.R(),
+        s.later_from_earlier.translation + Eigen::Vector3d(0.03, -0.02, 0.0));
+    prior.reference_inlier_ratio = ratio;
+    return prior;
+  };
+  const PairMotionPrior turn = turned_prior(4.2, -0.7);
+
+  InfinityOptions no_scan;
+  no_scan.prior_scan_seeds = 0;
+  const auto refused = ThresholdInfinity(s.pair.correspondences, TestIntrinsics(), no_scan, &turn);
+  ASSERT_TRUE(refused.ok() && refused->has_motion);
+  EXPECT_FALSE(refused->motion_from_prior);
+
+  const auto scanned = ThresholdInfinity(s.pair.correspondences, TestIntrinsics(), {}, &turn);
+  ASSERT_TRUE(scanned.ok() && scanned->has_motion);
+  EXPECT_TRUE(scanned->motion_from_prior);
+  EXPECT_TRUE(scanned->prior_rotation_scanned);
+  EXPECT_LT(RotationAngleDeg(scanned->later_from_earlier.R(), s.later_from_earlier.R()), 0.05);
+  EXPECT_LT(RotationAngleDeg(scanned->later_from_earlier.R(), full->later_from_earlier.R()), 0.02);
+  EXPECT_LT(AngleBetweenDeg(scanned->later_from_earlier.translation,
+                            full->later_from_earlier.translation),
+            0.5);
+  EXPECT_GE(scanned->num_sampson_inliers, 0.98 * full->num_sampson_inliers);
+
+  // The tracker: a scanned fit sets the reference share anew (a fit from the
+  // prior's own rotation keeps the previous one).
+  ASSERT_NE(tracker.PriorFor(s.pair), nullptr);
+  tracker.Record(s.pair, &*scanned);
+  const SyntheticPair next = MakePair(Frame1(), Frame2(), 2, noise);
+  ASSERT_NE(tracker.PriorFor(next.pair), nullptr);
+  EXPECT_DOUBLE_EQ(tracker.PriorFor(next.pair)->reference_inlier_ratio,
+                   static_cast<double>(scanned->num_sampson_inliers) / s.label.size());
+
+  // Beyond the scan's +-6 deg of yaw: the full path, as without a prior.
+  const PairMotionPrior sharp = turned_prior(9.0, 0.0);
+  const auto beyond = ThresholdInfinity(s.pair.correspondences, TestIntrinsics(), {}, &sharp);
+  ASSERT_TRUE(beyond.ok() && beyond->has_motion);
+  EXPECT_FALSE(beyond->motion_from_prior);
+  EXPECT_FALSE(beyond->prior_rotation_scanned);
+  EXPECT_EQ(beyond->kept_indices, full->kept_indices);
+
+  InfinityOptions bad;
+  bad.prior_scan_step_deg = 0.0;
+  EXPECT_EQ(ThresholdInfinity(s.pair.correspondences, TestIntrinsics(), bad, &turn).status().code(),
+            StatusCode::kInvalidArgument);
+}
+
 // The full path's motion is USAC_MAGSAC's polished by the same Sampson
 // Levenberg-Marquardt as the fast path (relative_pose.h): refining it again
 // moves it by a negligible angle and gains no inliers. (MAGSAC's own E moved

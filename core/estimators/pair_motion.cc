@@ -4,12 +4,15 @@
 #include <cmath>
 #include <limits>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include <Eigen/Geometry>
 #include <Eigen/SVD>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
 
+#include "core/common/angles.h"
 #include "core/common/so3.h"
 #include "core/estimators/ransac.h"
 #include "core/estimators/relative_pose.h"
@@ -247,6 +250,60 @@ bool SeededFastPath(const MotionProblem& p, const PairMotionPrior& prior,
   return true;
 }
 
+// Seeds for the fast path when the prior's own rotation was refused: the
+// prior's rotation R_p turned in the later camera's frame,
+//   R = R_y(yaw) R_x(pitch) R_p,  yaw in [-Y, Y], pitch in [-P, P] (a grid
+// of prior_scan_step_deg), with the prior's translation t_p. Each turn is
+// scored by the correspondences within the refinement's widest re-selection
+// threshold (3 x ransac_threshold_px, Sampson) of E = [t_p]x R, on every
+// second correspondence (a count, not a fit). The best-scoring turns come
+// first, each more than 1.5 grid steps from those before it (neighbours of
+// one optimum are one seed). At most prior_scan_seeds; none when that is 0.
+// Cost: ~225 turns x n/2 Sampson distances, a few % of one USAC_MAGSAC run.
+std::vector<Rigid3d> ScannedSeeds(const MotionProblem& p, const PairMotionPrior& prior) {
+  const PairMotionOptions& o = p.options;
+  std::vector<Rigid3d> seeds;
+  if (o.prior_scan_seeds <= 0) return seeds;
+  const Eigen::Matrix3d R_p = prior.later_from_earlier.R();
+  const Eigen::Vector3d t_p = prior.later_from_earlier.translation.normalized();
+  const Eigen::Matrix3d t_x = Skew(t_p);
+  const double wide = 3.0 * p.normalised_threshold;
+  const int yaw_steps = static_cast<int>(std::floor(o.prior_scan_yaw_deg / o.prior_scan_step_deg));
+  const int pitch_steps =
+      static_cast<int>(std::floor(o.prior_scan_pitch_deg / o.prior_scan_step_deg));
+  std::vector<std::pair<int, Eigen::Matrix3d>> scored;
+  for (int i = -yaw_steps; i <= yaw_steps; ++i) {
+    for (int j = -pitch_steps; j <= pitch_steps; ++j) {
+      if (i == 0 && j == 0) continue;  // the prior's own rotation was refused
+      const Eigen::Matrix3d R =
+          Eigen::AngleAxisd(DegToRad(i * o.prior_scan_step_deg), Eigen::Vector3d::UnitY())
+              .toRotationMatrix() *
+          Eigen::AngleAxisd(DegToRad(j * o.prior_scan_step_deg), Eigen::Vector3d::UnitX())
+              .toRotationMatrix() *
+          R_p;
+      const Eigen::Matrix3d E = t_x * R;
+      int count = 0;
+      for (size_t k = 0; k < p.rays_earlier.size(); k += 2) {
+        count += std::abs(SampsonDistance(E, p.rays_earlier[k], p.rays_later[k])) <= wide ? 1 : 0;
+      }
+      scored.emplace_back(count, R);
+    }
+  }
+  // Stable: equal counts keep the grid's order, so the seeds are deterministic.
+  std::stable_sort(scored.begin(), scored.end(),
+                   [](const auto& a, const auto& b) { return a.first > b.first; });
+  const double min_apart_rad = DegToRad(1.5 * o.prior_scan_step_deg);
+  for (const auto& [count, R] : scored) {
+    if (static_cast<int>(seeds.size()) >= o.prior_scan_seeds) break;
+    bool apart = true;
+    for (const Rigid3d& seed : seeds) {
+      apart = apart && Eigen::AngleAxisd(seed.R() * R.transpose()).angle() > min_apart_rad;
+    }
+    if (apart) seeds.emplace_back(R, t_p);
+  }
+  return seeds;
+}
+
 // cv::recoverPose's choice among the four motions an essential matrix allows,
 // (R1 or R2, +t or -t) from cv::decomposeEssentialMat: the one with the most
 // E-inliers in front of both cameras within 50 baselines, the first in that
@@ -417,13 +474,16 @@ Status PairMotionOptions::Check(const std::string& who) const {
   if (!(ransac_threshold_px > 0.0) || !(confidence > 0.0 && confidence < 1.0) ||
       !(min_parallax_inlier_ratio >= 0.0 && min_parallax_inlier_ratio <= 1.0) ||
       !(min_parallax_chance_ratio >= 0.0) || !(prior_min_inlier_ratio >= 0.0) ||
-      !(prior_decision_margin >= 1.0)) {
+      !(prior_decision_margin >= 1.0) || !(prior_scan_seeds >= 0) ||
+      !(prior_scan_yaw_deg >= 0.0 && prior_scan_yaw_deg <= 30.0) ||
+      !(prior_scan_pitch_deg >= 0.0 && prior_scan_pitch_deg <= 30.0) ||
+      !(prior_scan_step_deg > 0.0)) {
     return InvalidArgumentError(
         who +
         ": ransac_threshold_px must be > 0, confidence in (0, 1), "
         "min_parallax_inlier_ratio in [0, 1], min_parallax_chance_ratio >= 0, "
-        "prior_min_inlier_ratio >= 0 "
-        "and prior_decision_margin >= 1");
+        "prior_min_inlier_ratio >= 0, prior_decision_margin >= 1, prior_scan_seeds >= 0, "
+        "prior_scan_yaw_deg and prior_scan_pitch_deg in [0, 30] and prior_scan_step_deg > 0");
   }
   return Status::Ok();
 }
@@ -469,8 +529,16 @@ StatusOr<PairMotionReport> EstimatePairMotion(const std::vector<Correspondence>&
   p.min_parallax_px = std::max(min_parallax_px, options.ransac_threshold_px);
 
   if (prior != nullptr && options.use_prior && prior->later_from_earlier.translation.norm() > 0.0 &&
-      prior->later_from_earlier.translation.allFinite() && SeededFastPath(p, *prior, &result)) {
-    return result;
+      prior->later_from_earlier.translation.allFinite()) {
+    if (SeededFastPath(p, *prior, &result)) return result;
+    for (const Rigid3d& seed : ScannedSeeds(p, *prior)) {
+      PairMotionPrior turned = *prior;
+      turned.later_from_earlier = seed;
+      if (SeededFastPath(p, turned, &result)) {
+        result.prior_rotation_scanned = true;
+        return result;
+      }
+    }
   }
   SLAPSE_RETURN_IF_ERROR(FullPath(p, &result));
   return result;
@@ -489,7 +557,7 @@ void PairMotionPriorTracker::Record(const AnchorPair& pair, const PairMotionRepo
   PairMotionPrior prior;
   prior.later_from_earlier = result->later_from_earlier;
   prior.reference_inlier_ratio =
-      result->motion_from_prior && used != nullptr
+      result->motion_from_prior && !result->prior_rotation_scanned && used != nullptr
           ? used->reference_inlier_ratio
           : static_cast<double>(result->num_sampson_inliers) / pair.correspondences.size();
   prior_ = prior;

@@ -21,7 +21,9 @@
 //    the rotation-only model cannot explain, else the rotation-only model (or
 //    the identity) is the motion;
 //  - seeded fast path: the previous pair's motion refined locally, accepted
-//    only when it decides has_motion clearly; otherwise the full path.
+//    only when it decides has_motion clearly; when refused, a few rotations
+//    near the prior's (a scan of yaw and pitch) are tried the same way;
+//    otherwise the full path.
 //
 // Correspondences that are no E-inliers (wrong MVs) are not removed here:
 // e_inlier_mask lets callers drop them.
@@ -56,11 +58,26 @@ struct PairMotionOptions {
   double prior_min_inlier_ratio = 0.9;
   // The fast path's has_motion tests must pass by this factor (>= 1).
   double prior_decision_margin = 1.5;
+  // A refused prior is tried again from up to prior_scan_seeds other
+  // rotations before the full path (0 = off): the prior's rotation turned
+  // about the later camera's y axis (yaw, for a camera looking along the
+  // road) by up to +-prior_scan_yaw_deg and about its x axis (pitch) by up to
+  // +-prior_scan_pitch_deg, in steps of prior_scan_step_deg; the turns that
+  // fit the most correspondences with the prior's translation go first. For
+  // turns at low frame rates, where the rotation changes by degrees from one
+  // pair to the next and the refinement's reach is about one degree
+  // (docs/METHOD.md "Pair motion and plane at infinity").
+  int prior_scan_seeds = 3;
+  double prior_scan_yaw_deg = 6.0;
+  double prior_scan_pitch_deg = 2.0;
+  double prior_scan_step_deg = 0.5;
 
   // InvalidArgument (prefixed with `who`) unless ransac_threshold_px > 0,
   // confidence in (0, 1), min_parallax_inlier_ratio in [0, 1],
   // min_parallax_chance_ratio >= 0,
-  // prior_min_inlier_ratio >= 0 and prior_decision_margin >= 1.
+  // prior_min_inlier_ratio >= 0, prior_decision_margin >= 1,
+  // prior_scan_seeds >= 0, prior_scan_yaw_deg and prior_scan_pitch_deg in
+  // [0, 30] and prior_scan_step_deg > 0.
   Status Check(const std::string& who = "PairMotionOptions") const;
 };
 
@@ -102,6 +119,8 @@ struct PairMotionReport {
   // later_from_earlier is <= ransac_threshold_px (in px via the mean focal length).
   int num_sampson_inliers = 0;
   bool motion_from_prior = false;  // the seeded fast path was accepted
+  // ... from a scanned rotation (prior_scan_seeds), not the prior's own.
+  bool prior_rotation_scanned = false;
 };
 
 // The pair's motion: the seeded fast path when `prior` is given and
@@ -127,7 +146,8 @@ double RotationOnlyParallaxPx(const Eigen::Matrix3d& KRKinv, const Correspondenc
 // path: the prior for a pair is the previous pair's motion when that pair had
 // one and ended where this one starts; its reference_inlier_ratio is the last
 // full fit's Sampson-inlier share (kept through a run of seeded fits, so they
-// cannot drift it down).
+// cannot drift it down). A fit from a scanned rotation sets a new reference,
+// as the full fit it stands in for would have.
 class PairMotionPriorTracker {
  public:
   // Null when there is no usable prior for `pair`.
