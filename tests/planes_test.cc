@@ -553,10 +553,19 @@ TEST(ThresholdInfinityTest, ScannedRotationFollowsATurn) {
   EXPECT_FALSE(beyond->prior_rotation_scanned);
   EXPECT_EQ(beyond->kept_indices, full->kept_indices);
 
-  InfinityOptions bad;
-  bad.prior_scan_step_deg = 0.0;
-  EXPECT_EQ(ThresholdInfinity(s.pair.correspondences, TestIntrinsics(), bad, &turn).status().code(),
-            StatusCode::kInvalidArgument);
+  // A grid too fine to scan, or a negative count: a broken contract.
+  for (const double step_deg : {0.0, 0.05}) {
+    InfinityOptions bad;
+    bad.prior_scan_step_deg = step_deg;
+    EXPECT_EQ(
+        ThresholdInfinity(s.pair.correspondences, TestIntrinsics(), bad, &turn).status().code(),
+        StatusCode::kInvalidArgument);
+  }
+  InfinityOptions negative;
+  negative.prior_scan_seeds = -1;
+  EXPECT_EQ(
+      ThresholdInfinity(s.pair.correspondences, TestIntrinsics(), negative, &turn).status().code(),
+      StatusCode::kInvalidArgument);
 }
 
 // The full path's motion is USAC_MAGSAC's polished by the same Sampson

@@ -477,13 +477,13 @@ Status PairMotionOptions::Check(const std::string& who) const {
       !(prior_decision_margin >= 1.0) || !(prior_scan_seeds >= 0) ||
       !(prior_scan_yaw_deg >= 0.0 && prior_scan_yaw_deg <= 30.0) ||
       !(prior_scan_pitch_deg >= 0.0 && prior_scan_pitch_deg <= 30.0) ||
-      !(prior_scan_step_deg > 0.0)) {
+      !(prior_scan_step_deg >= 0.1)) {
     return InvalidArgumentError(
         who +
         ": ransac_threshold_px must be > 0, confidence in (0, 1), "
         "min_parallax_inlier_ratio in [0, 1], min_parallax_chance_ratio >= 0, "
         "prior_min_inlier_ratio >= 0, prior_decision_margin >= 1, prior_scan_seeds >= 0, "
-        "prior_scan_yaw_deg and prior_scan_pitch_deg in [0, 30] and prior_scan_step_deg > 0");
+        "prior_scan_yaw_deg and prior_scan_pitch_deg in [0, 30] and prior_scan_step_deg >= 0.1");
   }
   return Status::Ok();
 }

@@ -77,7 +77,7 @@ struct PairMotionOptions {
   // min_parallax_chance_ratio >= 0,
   // prior_min_inlier_ratio >= 0, prior_decision_margin >= 1,
   // prior_scan_seeds >= 0, prior_scan_yaw_deg and prior_scan_pitch_deg in
-  // [0, 30] and prior_scan_step_deg > 0.
+  // [0, 30] and prior_scan_step_deg >= 0.1 (at most 601 x 601 turns).
   Status Check(const std::string& who = "PairMotionOptions") const;
 };
 
