@@ -5,7 +5,9 @@
 // and the tracks.
 #include <cstdio>
 #include <filesystem>
+#include <map>
 #include <optional>
+#include <string>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -96,6 +98,7 @@ TEST_F(FrontEndTest, PipelineStepsCarryTheFrontEndsPlanes) {
   const std::vector<FrameRecord> frames = Frames();
   FrontEnd front_end(drive_->intrinsics, sigma_px_);
   Pipeline pipeline(drive_->intrinsics, sigma_px_);
+  std::map<PairMotionPath, int> paths;  // PipelineStep::motion_path -> pairs
   for (const FrameRecord& frame : frames) {
     std::optional<FrontEndStep> front = front_end.Push(frame);
     auto step = pipeline.Push(frame);
@@ -104,8 +107,14 @@ TEST_F(FrontEndTest, PipelineStepsCarryTheFrontEndsPlanes) {
     if (!front.has_value()) continue;
     ASSERT_TRUE(front->infinity.ok() && front->extraction.ok());
     EXPECT_EQ((*step)->kept, static_cast<int>(front->infinity->kept_indices.size()));
+    EXPECT_EQ((*step)->motion_path, PairMotionPathOf(*front->infinity));
     ExpectSamePlanes((*step)->extracted, front->extraction->planes);
+    ++paths[(*step)->motion_path];
   }
+  // The first pair has no prior: the full fit; most others follow the prior.
+  EXPECT_GE(paths[PairMotionPath::kFullFit], 1);
+  EXPECT_GT(paths[PairMotionPath::kPrior], paths[PairMotionPath::kFullFit]);
+  EXPECT_EQ(paths[PairMotionPath::kNone], 0);
 }
 
 TEST_F(FrontEndTest, ResetForgetsThePriorAndTheTracks) {

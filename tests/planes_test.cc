@@ -380,6 +380,8 @@ TEST(ThresholdInfinityTest, DegenerateInputIsNoMotionNotError) {
   result = ThresholdInfinity({}, TestIntrinsics(), {});
   ASSERT_TRUE(result.ok());
   EXPECT_FALSE(result->has_motion);
+  EXPECT_EQ(PairMotionPathOf(*result), PairMotionPath::kNone);
+  EXPECT_STREQ(PairMotionPathName(PairMotionPath::kNone), "none");
   EXPECT_TRUE(result->kept_indices.empty() && result->dropped_indices.empty());
 }
 
@@ -422,6 +424,9 @@ TEST(ThresholdInfinityTest, SeededFastPathRecoversMotion) {
   ASSERT_TRUE(seeded.ok());
   ASSERT_TRUE(seeded->has_motion);
   EXPECT_TRUE(seeded->motion_from_prior);
+  EXPECT_EQ(PairMotionPathOf(*seeded), PairMotionPath::kPrior);
+  EXPECT_STREQ(PairMotionPathName(PairMotionPath::kPrior), "prior");
+  EXPECT_TRUE(full->full_fit);
   EXPECT_EQ(seeded->rotation_source, PairRotationSource::kEssential);
   EXPECT_LT(RotationAngleDeg(seeded->later_from_earlier.R(), s.later_from_earlier.R()), 0.05);
   EXPECT_GT(
@@ -524,11 +529,16 @@ TEST(ThresholdInfinityTest, ScannedRotationFollowsATurn) {
   const auto refused = ThresholdInfinity(s.pair.correspondences, TestIntrinsics(), no_scan, &turn);
   ASSERT_TRUE(refused.ok() && refused->has_motion);
   EXPECT_FALSE(refused->motion_from_prior);
+  EXPECT_EQ(PairMotionPathOf(*refused), PairMotionPath::kFullFit);
+  EXPECT_STREQ(PairMotionPathName(PairMotionPath::kFullFit), "full fit");
 
   const auto scanned = ThresholdInfinity(s.pair.correspondences, TestIntrinsics(), {}, &turn);
   ASSERT_TRUE(scanned.ok() && scanned->has_motion);
   EXPECT_TRUE(scanned->motion_from_prior);
   EXPECT_TRUE(scanned->prior_rotation_scanned);
+  EXPECT_FALSE(scanned->full_fit);
+  EXPECT_EQ(PairMotionPathOf(*scanned), PairMotionPath::kTurnedPrior);
+  EXPECT_STREQ(PairMotionPathName(PairMotionPath::kTurnedPrior), "turned prior");
   EXPECT_LT(RotationAngleDeg(scanned->later_from_earlier.R(), s.later_from_earlier.R()), 0.05);
   EXPECT_LT(RotationAngleDeg(scanned->later_from_earlier.R(), full->later_from_earlier.R()), 0.02);
   EXPECT_LT(AngleBetweenDeg(scanned->later_from_earlier.translation,

@@ -53,7 +53,7 @@ CsvFile OpenStepsCsv(const std::string& path) {
     std::fprintf(
         csv.get(),
         "later_index,tracking,step_length,kept,filter_planes,updated,added,removed,rejected,"
-        "reassociated,reidentified,road_coasting,rms_residual_px,extracted,note\n");
+        "reassociated,reidentified,road_coasting,rms_residual_px,extracted,note,motion_path\n");
   }
   return csv;
 }
@@ -72,12 +72,12 @@ void WriteStepRow(std::FILE* csv, const PipelineStep& s, const std::vector<Timed
                                             traj[traj.size() - 2].world_from_cam.translation)
                                                .norm()
                                          : 0.0;
-  std::fprintf(csv, "%lld,%d,%.4f,%d,%zu,%d,%d,%d,%d,%d,%d,%d,%.3f,%s,\"%s\"\n",
+  std::fprintf(csv, "%lld,%d,%.4f,%d,%zu,%d,%d,%d,%d,%d,%d,%d,%.3f,%s,\"%s\",%s\n",
                static_cast<long long>(s.later_index), s.tracking ? 1 : 0, length, s.kept,
                s.planes.size(), s.ekf.planes_updated, s.ekf.planes_added, s.ekf.planes_removed,
                s.ekf.planes_rejected, s.ekf.planes_reassociated, s.ekf.planes_reidentified,
                s.ekf.road_coasting ? 1 : 0, s.ekf.rms_residual_px, extracted.c_str(),
-               s.note.c_str());
+               s.note.c_str(), PairMotionPathName(s.motion_path));
 }
 
 // The truth in the top-down plot: its path and the facades' footprints on the road.
@@ -267,10 +267,12 @@ int RunRun(int argc, char** argv) {
   std::vector<PlaneEstimate> plane_estimates;
   const bool progress = !quiet && isatty(STDERR_FILENO);
   PipelineStepCounts counts;
-  std::string last_note;   // why the last untracked step did not track
-  std::string scale_note;  // the last step's, when it said something
+  std::string last_note;                       // why the last untracked step did not track
+  std::string scale_note;                      // the last step's, when it said something
+  std::map<PairMotionPath, int> motion_paths;  // PipelineStep::motion_path -> pairs
   auto record = [&](const PipelineStep& s) {
     if (!s.note.empty()) last_note = s.note;
+    ++motion_paths[s.motion_path];
     if (!s.scale_note.empty()) scale_note = s.scale_note;
     if (steps_csv) WriteStepRow(steps_csv.get(), s, pipeline.trajectory());
     AppendPlaneEstimates(s.later_index, s.planes, s.extracted, s.extracted_filter_ids,
@@ -319,6 +321,13 @@ int RunRun(int argc, char** argv) {
       "interpolated\n",
       pipeline.poses().size(), kinds[PoseKind::kAnchor], kinds[PoseKind::kCoasting],
       kinds[PoseKind::kMotionOnly], kinds[PoseKind::kFrame], kinds[PoseKind::kInterpolated]);
+  // Each pair's motion estimate, including a pair estimated again when it was
+  // extended: the full fit is the pipeline's costliest stage.
+  std::printf(
+      "motion     %d pairs from the previous pair's motion, %d from a turn of it, %d by the "
+      "full fit, %d with none (too few vectors, or the estimate failed)\n",
+      motion_paths[PairMotionPath::kPrior], motion_paths[PairMotionPath::kTurnedPrior],
+      motion_paths[PairMotionPath::kFullFit], motion_paths[PairMotionPath::kNone]);
   if (!scale_note.empty()) std::printf("scale      %s\n", scale_note.c_str());
   if (!pipeline.trajectory().empty()) {
     std::printf("support    %s\n", pipeline.scale_support().Summary().c_str());

@@ -421,6 +421,7 @@ Status EssentialMotion(const MotionProblem& p, PairMotionReport* result, bool* h
 // 0.136 deg and 3.07 -> 2.96 deg on MPEG-2, `bench/motion_accuracy`), so both
 // paths now give the same kind of estimate.
 Status FullPath(const MotionProblem& p, PairMotionReport* result) {
+  result->full_fit = true;
   const RansacReport<Eigen::Matrix3d> rotation =
       Ransac<RotationOnlyEstimator>(p.rotation_ransac).Estimate(p.rays_earlier, p.rays_later);
   bool have_e = false;
@@ -486,6 +487,26 @@ Status PairMotionOptions::Check(const std::string& who) const {
         "prior_scan_yaw_deg and prior_scan_pitch_deg in [0, 30] and prior_scan_step_deg >= 0.1");
   }
   return Status::Ok();
+}
+
+PairMotionPath PairMotionPathOf(const PairMotionReport& report) {
+  if (report.prior_rotation_scanned) return PairMotionPath::kTurnedPrior;
+  if (report.motion_from_prior) return PairMotionPath::kPrior;
+  return report.full_fit ? PairMotionPath::kFullFit : PairMotionPath::kNone;
+}
+
+const char* PairMotionPathName(PairMotionPath path) {
+  switch (path) {
+    case PairMotionPath::kPrior:
+      return "prior";
+    case PairMotionPath::kTurnedPrior:
+      return "turned prior";
+    case PairMotionPath::kFullFit:
+      return "full fit";
+    case PairMotionPath::kNone:
+      break;
+  }
+  return "none";
 }
 
 double RotationOnlyParallaxPx(const Eigen::Matrix3d& KRKinv, const Correspondence& c) {

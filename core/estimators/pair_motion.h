@@ -121,7 +121,22 @@ struct PairMotionReport {
   bool motion_from_prior = false;  // the seeded fast path was accepted
   // ... from a scanned rotation (prior_scan_seeds), not the prior's own.
   bool prior_rotation_scanned = false;
+  // The full path ran (USAC_MAGSAC and the rotation-only RANSAC: the costly
+  // one, docs/BENCHMARKS.md "Session 31"). False on the fast path and when
+  // there were too few correspondences to estimate anything.
+  bool full_fit = false;
 };
+
+// How a pair's motion was found, for reports.
+enum class PairMotionPath {
+  kNone,         // too few correspondences: nothing was estimated
+  kPrior,        // the fast path from the prior's rotation
+  kTurnedPrior,  // the fast path from a scanned rotation (prior_scan_seeds)
+  kFullFit,      // the full path
+};
+PairMotionPath PairMotionPathOf(const PairMotionReport& report);
+// "none", "prior", "turned prior", "full fit".
+const char* PairMotionPathName(PairMotionPath path);
 
 // The pair's motion: the seeded fast path when `prior` is given and
 // options.use_prior, else (or when the prior is refused) the full path.

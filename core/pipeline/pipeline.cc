@@ -125,6 +125,7 @@ PipelineStep Pipeline::Process(const FrontEndStep& front) {
   static_cast<FrontEndTimes&>(step.times) = front.times;
   // A failed motion or extraction: the filter goes on without planes.
   step.kept = front.infinity.ok() ? static_cast<int>(front.infinity->kept_indices.size()) : 0;
+  if (front.infinity.ok()) step.motion_path = PairMotionPathOf(*front.infinity);
   if (front.extraction.ok()) step.extracted = front.extraction->planes;
   const std::vector<PlaneObservation> observations = ObservationsOf(pair, step.extracted);
   const double dt_s = pair.later_timestamp_s - pair.earlier_timestamp_s;

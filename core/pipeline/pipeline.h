@@ -145,10 +145,12 @@ struct PipelineStep {
   int64_t earlier_index = -1, later_index = -1;  // the anchor pair
   double timestamp_s = 0.0;                      // of the later anchor
   SegmentType segment = SegmentType::kPP;
-  bool tracking = false;                  // the filter is running (pose and planes valid)
-  bool metric = false;                    // lengths are metres
-  Rigid3d world_from_cam;                 // pose of the later anchor
-  int correspondences = 0, kept = 0;      // merged MBs, and those with parallax
+  bool tracking = false;              // the filter is running (pose and planes valid)
+  bool metric = false;                // lengths are metres
+  Rigid3d world_from_cam;             // pose of the later anchor
+  int correspondences = 0, kept = 0;  // merged MBs, and those with parallax
+  // How the pair's motion was found (kNone also when the estimate failed).
+  PairMotionPath motion_path = PairMotionPath::kNone;
   std::vector<ExtractedPlane> extracted;  // this pair's planes (MB sets, homographies)
   // Per extracted plane: the track id of the filter plane it is an
   // observation of (its own id, or the road's when the filter re-identified

@@ -37,6 +37,7 @@ struct Run {
   PipelineStepCounts counts;    // extended: pairs handed back for a longer baseline
   int motion_only_anchors = 0;  // anchors posed without a plane (PoseKind::kMotionOnly)
   int coasting_anchors = 0;     // anchors posed by the motion model (PoseKind::kCoasting)
+  int full_motion_fits = 0;     // pairs whose motion took the full path (PipelineStep::motion_path)
   ScaleSupport scale_support;
   std::optional<double> height_road_depression_deg;  // Pipeline's, when metric from the height
   std::map<std::string, int> notes;
@@ -48,6 +49,7 @@ StatusOr<Run> RunPipeline(const std::vector<FrameRecord>& frames, const Intrinsi
   Pipeline pipeline(intrinsics, sigma_px, options);
   auto record = [&](const PipelineStep& s) {
     if (!s.tracking && !s.extended && !s.note.empty()) ++run.notes[s.note];
+    run.full_motion_fits += s.motion_path == PairMotionPath::kFullFit;
     AppendPlaneEstimates(s.later_index, s.planes, s.extracted, s.extracted_filter_ids, &run.planes);
   };
   for (const FrameRecord& f : frames) {
@@ -157,6 +159,7 @@ StatusOr<DriveResult> EvaluateDrive(const DriveSpec& spec, const DriveEvalOption
   r.tracked_pairs = base->counts.tracked;
   r.motion_only_anchors = base->motion_only_anchors;
   r.coasting_anchors = base->coasting_anchors;
+  r.full_motion_fits = base->full_motion_fits;
   r.extended_pairs = base->counts.extended;
   r.scale_support = base->scale_support;
   int most = 0;
@@ -362,7 +365,7 @@ std::string DriveResultsCsv(const std::vector<DriveResult>& results) {
          "height,"
          "scale_err_height,metric_speed,scale_err_speed,metric_first_step,scale_err_first_step,"
          "camera_height_m,pitch_down_deg,simulate_s,evaluate_s,note,motion_only_anchors,coasting_"
-         "anchors,extended_pairs,plane_step_share,height_road_depression_deg\n";
+         "anchors,extended_pairs,plane_step_share,height_road_depression_deg,full_motion_fits\n";
   for (const DriveResult& r : results) {
     const SimulateOptions& o = r.spec.sim;
     std::string note = r.note;
@@ -381,7 +384,7 @@ std::string DriveResultsCsv(const std::vector<DriveResult>& results) {
     csv << "," << o.camera_height_min_m << "," << o.pitch_down_min_deg << "," << r.simulate_s << ","
         << r.evaluate_s << ",\"" << note << "\"," << r.motion_only_anchors << ","
         << r.coasting_anchors << "," << r.extended_pairs << "," << r.scale_support.PlaneStepShare()
-        << "," << r.height_road_depression_deg << "\n";
+        << "," << r.height_road_depression_deg << "," << r.full_motion_fits << "\n";
   }
   return csv.str();
 }

@@ -47,7 +47,10 @@ struct DriveResult {
   int motion_only_anchors = 0;  // tracked anchors without a plane (PoseKind::kMotionOnly)
   int coasting_anchors = 0;     // tracked anchors the motion model posed (PoseKind::kCoasting)
   int extended_pairs = 0;       // pairs handed back for a longer baseline (PipelineStep::extended)
-  ScaleSupport scale_support;   // how many anchor steps a plane measured (Pipeline::scale_support)
+  // Pairs whose motion took the full path (PipelineStep::motion_path
+  // kFullFit): the pipeline's costliest stage, docs/BENCHMARKS.md "Session 31".
+  int full_motion_fits = 0;
+  ScaleSupport scale_support;  // how many anchor steps a plane measured (Pipeline::scale_support)
   double drive_distance_m = 0.0;  // the true path, whole drive
   bool evaluated = false;         // >= 3 poses: the errors below are valid
   double distance_m = 0.0;        // the true path over the posed frames
