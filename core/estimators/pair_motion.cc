@@ -112,17 +112,25 @@ void CountParallax(const std::vector<Correspondence>& correspondences, const Eig
   }
 }
 
-// Correspondences whose Sampson distance under later_from_earlier is <= max_error
-// (normalised units).
+// Correspondences whose Sampson distance under the essential matrix E is <=
+// max_error (normalised units), counting every `stride`-th one.
 int CountSampsonInliers(const std::vector<Eigen::Vector3d>& rays_earlier,
-                        const std::vector<Eigen::Vector3d>& rays_later,
-                        const Rigid3d& later_from_earlier, double max_error) {
-  const Eigen::Matrix3d E = Skew(later_from_earlier.translation) * later_from_earlier.R();
+                        const std::vector<Eigen::Vector3d>& rays_later, const Eigen::Matrix3d& E,
+                        double max_error, size_t stride = 1) {
   int count = 0;
-  for (size_t i = 0; i < rays_earlier.size(); ++i) {
+  for (size_t i = 0; i < rays_earlier.size(); i += stride) {
     count += std::abs(SampsonDistance(E, rays_earlier[i], rays_later[i])) <= max_error ? 1 : 0;
   }
   return count;
+}
+
+// ... under later_from_earlier, every correspondence.
+int CountSampsonInliers(const std::vector<Eigen::Vector3d>& rays_earlier,
+                        const std::vector<Eigen::Vector3d>& rays_later,
+                        const Rigid3d& later_from_earlier, double max_error) {
+  return CountSampsonInliers(rays_earlier, rays_later,
+                             Skew(later_from_earlier.translation) * later_from_earlier.R(),
+                             max_error);
 }
 
 // What both paths share: the rays, K and the thresholds.
@@ -281,12 +289,7 @@ std::vector<Rigid3d> ScannedSeeds(const MotionProblem& p, const PairMotionPrior&
           Eigen::AngleAxisd(DegToRad(j * o.prior_scan_step_deg), Eigen::Vector3d::UnitX())
               .toRotationMatrix() *
           R_p;
-      const Eigen::Matrix3d E = t_x * R;
-      int count = 0;
-      for (size_t k = 0; k < p.rays_earlier.size(); k += 2) {
-        count += std::abs(SampsonDistance(E, p.rays_earlier[k], p.rays_later[k])) <= wide ? 1 : 0;
-      }
-      scored.emplace_back(count, R);
+      scored.emplace_back(CountSampsonInliers(p.rays_earlier, p.rays_later, t_x * R, wide, 2), R);
     }
   }
   // Stable: equal counts keep the grid's order, so the seeds are deterministic.
