@@ -2,6 +2,7 @@
 
 #include <atomic>
 #include <cstdlib>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <mutex>
@@ -282,24 +283,38 @@ void LoggedProcess::Signal(int sig) {
 int FreeLoopbackTcpPort() {
   // Never the same port twice in one test process: a test that takes
   // several (replicas, a proxy) needs them distinct, and a port released at
-  // once may be handed out again.
+  // once may be handed out again. Below the kernel's ephemeral range
+  // (ip_local_port_range, usually from 32768), so that no outgoing
+  // connection of a test running beside this one (gRPC clients, ffmpeg) is
+  // given the port between this check and the test's listen: a port taken
+  // that way failed a replica's start ("cannot listen ... in use"). The
+  // candidates start at a per-process random place, so parallel test
+  // processes do not try the same ones.
   static std::mutex mutex;
   static std::set<int> handed_out;
+  static std::mt19937 rng(static_cast<unsigned>(getpid()) * 2654435761u ^
+                          static_cast<unsigned>(time(nullptr)));
   std::lock_guard<std::mutex> lock(mutex);
-  for (int attempt = 0; attempt < 100; ++attempt) {
+  int ephemeral_low = 32768;
+  std::ifstream range("/proc/sys/net/ipv4/ip_local_port_range");
+  if (!(range >> ephemeral_low)) ephemeral_low = 32768;
+  constexpr int kLowest = 10000;
+  if (ephemeral_low <= kLowest + 1000) ephemeral_low = 65536;  // odd range: take any above kLowest
+  std::uniform_int_distribution<int> pick(kLowest, ephemeral_low - 1);
+  for (int attempt = 0; attempt < 200; ++attempt) {
+    const int candidate = pick(rng);
+    if (handed_out.count(candidate) != 0) continue;
     const int fd = socket(AF_INET, SOCK_STREAM, 0);
     sockaddr_in sa{};
     sa.sin_family = AF_INET;
     sa.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    socklen_t len = sizeof(sa);
-    int port = 0;
-    if (bind(fd, reinterpret_cast<sockaddr*>(&sa), sizeof(sa)) == 0 &&
-        getsockname(fd, reinterpret_cast<sockaddr*>(&sa), &len) == 0) {
-      port = ntohs(sa.sin_port);
-    }
+    sa.sin_port = htons(static_cast<uint16_t>(candidate));
+    const bool free = bind(fd, reinterpret_cast<sockaddr*>(&sa), sizeof(sa)) == 0;
     close(fd);
-    if (port == 0) return 0;
-    if (handed_out.insert(port).second) return port;
+    if (free) {
+      handed_out.insert(candidate);
+      return candidate;
+    }
   }
   return 0;
 }
