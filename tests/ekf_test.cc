@@ -180,6 +180,30 @@ TEST(EkfJacobians, RoadHeightChangeMatchesFiniteDifferences) {
   EXPECT_LT((n_pi - d_pi).norm(), 1e-8) << n_pi << "\n\n" << d_pi;
 }
 
+TEST(EkfJacobians, RoadStepPredictionMatchesFiniteDifferences) {
+  Fixture fx;
+  const Eigen::Vector3d road_pi(0.01, 0.66, -0.03);
+  Eigen::Matrix3d d_theta, d_t, d_pi;
+  const Eigen::Vector3d h =
+      PlaneEkf::RoadStepPrediction(fx.R, fx.t, road_pi, &d_theta, &d_t, &d_pi);
+  // h is |t| pi_e with pi_e the road in the earlier camera: TransitionPlane
+  // carries pi_e back to road_pi.
+  const Eigen::Vector3d pi_e = h / fx.t.norm();
+  EXPECT_LT(
+      (PlaneEkf::TransitionPlane(pi_e, fx.R, fx.t, nullptr, nullptr, nullptr) - road_pi).norm(),
+      1e-12);
+  auto f = [&](const Eigen::VectorXd& d) {
+    return Eigen::VectorXd(
+        PlaneEkf::RoadStepPrediction(fx.R * ExpSO3(d.segment<3>(0)), fx.t + d.segment<3>(3),
+                                     road_pi + d.segment<3>(6), nullptr, nullptr, nullptr));
+  };
+  const Eigen::MatrixXd n = NumericJacobian(
+      f, [](const Eigen::VectorXd& d) { return d; }, 9);
+  EXPECT_LT((n.leftCols(3) - d_theta).norm(), 1e-7) << n.leftCols(3) << "\n\n" << d_theta;
+  EXPECT_LT((n.middleCols(3, 3) - d_t).norm(), 1e-7) << n.middleCols(3, 3) << "\n\n" << d_t;
+  EXPECT_LT((n.rightCols(3) - d_pi).norm(), 1e-7) << n.rightCols(3) << "\n\n" << d_pi;
+}
+
 TEST(EkfJacobians, MotionErrorMatchesFiniteDifferences) {
   Fixture fx;
   // A measurement near the state (as the update sees it) and one far from it.
@@ -601,6 +625,79 @@ TEST(PlaneEkfTest, MotionMeasurementGateAndBadInput) {
   // The true step is taken.
   ASSERT_TRUE(ekf.UpdateMotion(poses[1].Inverse() * poses[2], &rep).ok());
   EXPECT_TRUE(rep.motion_updated);
+}
+
+// The road from the frames between the anchors (AddRoadFromStep,
+// UpdateRoadStep) on a filter without planes: the road joins with the
+// measured q = |t| pi_e, then a step length over the road's distance 8 %
+// longer than predicted lengthens the step towards it, one 60 % longer or
+// tilted 12 deg off the road (a wrong surface) is refused, and a second road
+// is not added.
+TEST(PlaneEkfTest, RoadFromTheFramesJoinsAndMeasuresTheStep) {
+  const Intrinsics K = Intrinsics::FromHorizontalFov(640, 480, 70);
+  const auto poses = DrivePoses(4, 1.0);
+  const Rigid3d step = poses[0].Inverse() * poses[1];
+  PlaneEkf ekf(K);
+  const Eigen::Vector3d n(0.0, std::cos(DegToRad(3.0)), std::sin(DegToRad(3.0)));
+  const double d = 1.5;
+  const Eigen::Vector3d q = step.translation.norm() / d * n;
+  const Eigen::Matrix3d q_cov = Eigen::Matrix3d::Identity() * 1e-4;
+  UpdateReport rep;
+  EXPECT_FALSE(ekf.AddRoadFromStep(q, q_cov, 7));  // before Initialize
+  EXPECT_EQ(ekf.UpdateRoadStep(q, 1e-4, &rep).code(), StatusCode::kFailedPrecondition);
+  ASSERT_TRUE(ekf.Initialize(step, 0.1).ok());
+  EXPECT_FALSE(ekf.RoadInEarlierCamera().has_value());
+  ASSERT_TRUE(ekf.UpdateRoadStep(q, 1e-4, &rep).ok());  // no road: nothing
+  EXPECT_FALSE(rep.road_step_updated);
+  EXPECT_FALSE(ekf.AddRoadFromStep(-q, q_cov, 7));  // above the camera: not road-like
+  ASSERT_TRUE(ekf.AddRoadFromStep(q, q_cov, 7));
+  ASSERT_EQ(ekf.planes().size(), 1u);
+  EXPECT_TRUE(ekf.planes()[0].road);
+  EXPECT_EQ(ekf.planes()[0].track_id, 7);
+  // In the later camera: pi_e carried by the step; back in the earlier one, q / |t|.
+  const Eigen::Vector3d pi_l = PlaneEkf::TransitionPlane(
+      q / step.translation.norm(), step.R(), step.translation, nullptr, nullptr, nullptr);
+  EXPECT_LT((ekf.planes()[0].pi - pi_l).norm(), 1e-9);
+  ASSERT_TRUE(ekf.RoadInEarlierCamera().has_value());
+  EXPECT_LT((*ekf.RoadInEarlierCamera() - q / step.translation.norm()).norm(), 1e-9);
+  EXPECT_EQ(Eigen::LLT<Eigen::MatrixXd>(ekf.covariance()).info(), Eigen::Success);
+  // Its scale moves with the trajectory's: correlated with the step's t.
+  EXPECT_GT((ekf.covariance().block<3, 3>(12, 3)).norm(), 0.0);
+  EXPECT_FALSE(ekf.AddRoadFromStep(q, q_cov, 8));  // a road is kept already
+
+  ASSERT_TRUE(ekf.Predict(0.1).ok());
+  const auto predicted_q = [&] {
+    return Eigen::Vector3d(ekf.prev_from_cur().translation.norm() * *ekf.RoadInEarlierCamera());
+  };
+  const auto predicted = [&] { return predicted_q().norm(); };
+  const double before = predicted();
+  const Eigen::Vector3d q_before = predicted_q();
+  const Rigid3d state_before = ekf.prev_from_cur();
+  const int observations_before = ekf.planes()[0].observations;
+  // A wrong surface: 60 % longer, or tilted 12 deg off the road: refused,
+  // state unchanged.
+  for (const Eigen::Vector3d& wrong :
+       {Eigen::Vector3d(1.6 * q_before),
+        Eigen::Vector3d(ExpSO3(Eigen::Vector3d(DegToRad(12.0), 0, 0)) * q_before)}) {
+    ASSERT_TRUE(ekf.UpdateRoadStep(wrong, 1e-4, &rep).ok());
+    EXPECT_FALSE(rep.road_step_updated);
+    EXPECT_LT((ekf.prev_from_cur().translation - state_before.translation).norm(), 1e-15);
+  }
+  // 8 % longer: taken, the prediction moves most of the way there.
+  ASSERT_TRUE(ekf.UpdateRoadStep(1.08 * q_before, 1e-4, &rep).ok());
+  EXPECT_TRUE(rep.road_step_updated);
+  EXPECT_EQ(ekf.planes()[0].observations, observations_before + 1);
+  EXPECT_GT(predicted(), 1.04 * before);
+  EXPECT_LT(predicted(), 1.08 * before + 1e-9);
+  EXPECT_GT(ekf.prev_from_cur().translation.norm(), state_before.translation.norm());
+  EXPECT_EQ(Eigen::LLT<Eigen::MatrixXd>(ekf.covariance()).info(), Eigen::Success);
+  EXPECT_LT((ekf.covariance() - ekf.covariance().transpose()).norm(), 1e-12);
+  // Not finite or not positive: a broken contract.
+  EXPECT_EQ(ekf.UpdateRoadStep(Eigen::Vector3d(NAN, 1, 0), 1e-4, &rep).code(),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(ekf.UpdateRoadStep(Eigen::Vector3d::Zero(), 1e-4, &rep).code(),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(ekf.UpdateRoadStep(q, 0.0, &rep).code(), StatusCode::kInvalidArgument);
 }
 
 // A car's direction of travel stays put in its camera's frame: after three

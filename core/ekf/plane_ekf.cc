@@ -800,4 +800,130 @@ Status PlaneEkf::UpdateMotion(const Rigid3d& measured_prev_from_cur, UpdateRepor
   return Status::Ok();
 }
 
+Eigen::Vector3d PlaneEkf::RoadStepPrediction(const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
+                                             const Eigen::Vector3d& pi, Eigen::Matrix3d* d_theta,
+                                             Eigen::Matrix3d* d_t, Eigen::Matrix3d* d_pi) {
+  const Eigen::Vector3d a = R * pi;
+  const double c = 1.0 + a.dot(t);
+  const double L = t.norm();
+  if (d_theta != nullptr) {
+    const Eigen::Matrix3d da = -R * Skew(pi);
+    *d_theta = L * da / c - L * a * (t.transpose() * da) / (c * c);
+  }
+  if (d_t != nullptr) *d_t = a * t.transpose() / (L * c) - L * a * a.transpose() / (c * c);
+  if (d_pi != nullptr) *d_pi = L * R / c - L * a * (t.transpose() * R) / (c * c);
+  return L * a / c;
+}
+
+std::optional<Eigen::Vector3d> PlaneEkf::RoadInEarlierCamera() const {
+  const int road = RoadIndex();
+  if (!initialized_ || road < 0 || !(t_.norm() > 0)) return std::nullopt;
+  return RoadStepPrediction(R_, t_, planes_[road].pi, nullptr, nullptr, nullptr) / t_.norm();
+}
+
+bool PlaneEkf::AddRoadFromStep(const Eigen::Vector3d& q, const Eigen::Matrix3d& q_cov,
+                               int track_id) {
+  const double L = t_.norm();
+  if (!initialized_ || options_.road_coast_updates <= 0 || RoadIndex() >= 0 || !(L > 0) ||
+      !q.allFinite() || !q_cov.allFinite()) {
+    return false;
+  }
+  for (const PlaneTrack& p : planes_) {
+    if (p.track_id == track_id) return false;
+  }
+  const Eigen::Vector3d pi_e = q / L;
+  Eigen::Matrix3d D_pi, D_theta, D_t;
+  const Eigen::Vector3d pi = TransitionPlane(pi_e, R_, t_, &D_pi, &D_theta, &D_t);
+  if (!pi.allFinite() || !IsRoadLike(pi)) return false;
+  // pi = T(q / |t|, R, t): dpi/dq = D_pi / |t|, dpi/ddtheta = D_theta,
+  // dpi/dt = D_t - D_pi q t^T / |t|^3.
+  const Eigen::Matrix3d J_q = D_pi / L;
+  Eigen::Matrix<double, 3, 6> J_m;
+  J_m << D_theta, D_t - D_pi * q * t_.transpose() / (L * L * L);
+  const int n = static_cast<int>(P_.rows());
+  const Eigen::MatrixXd P_mx = P_.middleRows(kTheta, 6);
+  Eigen::MatrixXd P = Eigen::MatrixXd::Zero(n + 3, n + 3);
+  P.topLeftCorner(n, n) = P_;
+  P.block(n, 0, 3, n) = J_m * P_mx;
+  P.block(0, n, n, 3) = P.block(n, 0, 3, n).transpose();
+  const Eigen::Matrix3d Q =
+      q_cov + std::pow(options_.road_step_rel_sigma * q.norm(), 2) * Eigen::Matrix3d::Identity();
+  P.block<3, 3>(n, n) =
+      J_q * Q * J_q.transpose() + J_m * P_mx.middleCols(kTheta, 6) * J_m.transpose();
+  P_ = std::move(P);
+  Symmetrize(&P_);
+  PlaneTrack track;
+  track.track_id = track_id;
+  track.pi = pi;
+  track.observations = 1;
+  track.road = true;
+  planes_.push_back(track);
+  return true;
+}
+
+Status PlaneEkf::UpdateRoadStep(const Eigen::Vector3d& q, double variance, UpdateReport* report) {
+  if (!initialized_) return FailedPreconditionError("EKF not initialised");
+  const double step_over_distance = q.norm();
+  if (!q.allFinite() || !(step_over_distance > 0) || !(variance > 0) || !std::isfinite(variance)) {
+    return InvalidArgumentError("road step measurement must be finite and positive");
+  }
+  UpdateReport local;
+  if (report == nullptr) report = &local;
+  report->road_step_updated = false;
+  const int road = RoadIndex();
+  if (road < 0 || !(t_.norm() > 0)) return Status::Ok();
+  const int n = static_cast<int>(P_.rows());
+  // Row 0: s = |h| (h = |t| pi_e, RoadStepPrediction), ds/dx = h^T / |h| dh/dx.
+  // Row 1: the road-height pseudo-measurement pi^T t = 0 (RoadHeightChange).
+  Eigen::Matrix3d d_theta, d_t, d_pi;
+  const Eigen::Vector3d h = RoadStepPrediction(R_, t_, planes_[road].pi, &d_theta, &d_t, &d_pi);
+  const Eigen::RowVector3d g = h.transpose() / h.norm();
+  Eigen::RowVector3d c_t, c_pi;
+  const double c = RoadHeightChange(planes_[road].pi, t_, &c_t, &c_pi);
+  Eigen::MatrixXd H = Eigen::MatrixXd::Zero(2, n);
+  H.block<1, 3>(0, kTheta) = g * d_theta;
+  H.block<1, 3>(0, kT) = g * d_t;
+  H.block<1, 3>(0, PlaneOffset(road)) = g * d_pi;
+  H.block<1, 3>(1, kT) = c_t;
+  H.block<1, 3>(1, PlaneOffset(road)) = c_pi;
+  Eigen::Matrix2d Q = Eigen::Matrix2d::Zero();
+  Q(0, 0) = variance + std::pow(options_.road_step_rel_sigma * step_over_distance, 2);
+  Q(1, 1) = std::pow(options_.road_height_rel_sigma, 2);
+  const Eigen::Vector2d r(step_over_distance - h.norm(), -c);
+  const Eigen::MatrixXd PHt = P_ * H.transpose();
+  const Eigen::Matrix2d S = H * PHt + Q;
+  Eigen::LLT<Eigen::Matrix2d> llt(S);
+  if (llt.info() != Eigen::Success) {
+    return InternalError("EKF road step innovation covariance is not positive definite");
+  }
+  report->road_step_chi2 = r(0) * r(0) / S(0, 0);
+  if (options_.road_step_gate_chi2 > 0 && report->road_step_chi2 > options_.road_step_gate_chi2) {
+    return Status::Ok();
+  }
+  if (options_.road_step_max_rel_change > 0 &&
+      std::abs(step_over_distance / h.norm() - 1.0) > options_.road_step_max_rel_change) {
+    return Status::Ok();
+  }
+  // A surface tilted away from the kept road is not the road (the angle of
+  // ReidentifyRoad's "the road seen again").
+  if (q.dot(h) <
+      std::cos(DegToRad(options_.road_reid_max_angle_deg)) * step_over_distance * h.norm()) {
+    return Status::Ok();
+  }
+  const Eigen::MatrixXd K = llt.solve(PHt.transpose()).transpose();  // P H^T S^-1
+  const Eigen::VectorXd delta = K * r;
+  if (!delta.allFinite()) return InternalError("EKF road step update diverged (non-finite step)");
+  R_ = R_ * ExpSO3(delta.segment<3>(kTheta));
+  t_ += delta.segment<3>(kT);
+  w_ += delta.segment<3>(kW);
+  v_ += delta.segment<3>(kV);
+  for (size_t i = 0; i < planes_.size(); ++i) planes_[i].pi += delta.segment<3>(PlaneOffset(i));
+  const Eigen::MatrixXd I_KH = Eigen::MatrixXd::Identity(n, n) - K * H;
+  P_ = I_KH * P_ * I_KH.transpose() + K * Q * K.transpose();
+  Symmetrize(&P_);
+  report->road_step_updated = true;
+  ++planes_[road].observations;
+  return Status::Ok();
+}
+
 }  // namespace slapse

@@ -125,6 +125,17 @@ struct EkfOptions {
   // A measurement whose squared Mahalanobis innovation (5 dof) exceeds this
   // is refused (99.9 % of a chi-square with 5 dof: 20.5); 0 = no gate.
   double motion_gate_chi2 = 20.5;
+  // The road seen from the frames between the anchors (UpdateRoadStep): a
+  // relative standard deviation added to the measured q for the speed's
+  // change within the step, and the chi-square gate (1 dof; 99.9 %: 10.83).
+  double road_step_rel_sigma = 0.02;
+  double road_step_gate_chi2 = 10.83;
+  // ... and refused when s differs from its prediction by more than this
+  // fraction of it, whatever the covariances say (0 = no such test): a road
+  // just added, or coasting long, is uncertain enough to pass the gate with
+  // a fit to the wrong surface, and a car's speed does not change that much
+  // from one anchor pair to the next.
+  double road_step_max_rel_change = 0.25;
   // (Road-like is the one road test of core/common/road.h with down = the
   // camera's +y axis and road_max_angle_deg.)
 };
@@ -169,6 +180,14 @@ struct UpdateReport {
   // the gate), and its squared Mahalanobis innovation.
   bool motion_updated = false;
   double motion_chi2 = 0.0;
+  // UpdateRoadStep: the road seen from the frames between the anchors was
+  // taken (false: not run, no road, or refused by the gate), and its squared
+  // Mahalanobis innovation.
+  bool road_step_updated = false;
+  double road_step_chi2 = 0.0;
+  // The road joined the filter from the frames (PlaneEkf::AddRoadFromStep,
+  // set by the pipeline).
+  bool road_added_from_frames = false;
   // The factor the state's lengths were rescaled by to pin the scale (1: none).
   double scale_correction = 1.0;
 };
@@ -206,6 +225,42 @@ class PlaneEkf {
   // for a non-finite measurement or one without translation; Internal when S
   // is not positive definite.
   Status UpdateMotion(const Rigid3d& measured_prev_from_cur, UpdateReport* report);
+
+  // The kept road's pi in the earlier anchor's camera of the current step
+  // (pi_e = R pi / (1 + (R pi)^T t)); nullopt without a road or a step.
+  std::optional<Eigen::Vector3d> RoadInEarlierCamera() const;
+
+  // Adds the road seen from the frames between the anchors where the state
+  // has none: q = |t| pi_e (core/estimators/road_step.h) with covariance
+  // q_cov gives pi_e = q / |t|, carried into the later camera by
+  // TransitionPlane; its covariance is J_q q_cov J_q^T + J_m P_mm J_m^T and
+  // its cross-covariance J_m P_mx (m: dtheta, t), so its scale is the
+  // trajectory's. It becomes the road (PlaneTrack::road) under `track_id`.
+  // False (nothing added) before Initialize, with a road already kept or
+  // road_coast_updates = 0, a track id in use, a step without translation,
+  // or a plane that is not road-like.
+  bool AddRoadFromStep(const Eigen::Vector3d& q, const Eigen::Matrix3d& q_cov, int track_id);
+
+  // Updates the state with the road seen from the frames between the anchors
+  // (core/estimators/road_step.h): q = |t| pi_e, of which the filter takes
+  // the length s = |t| / d_e (the step length over the road's distance in
+  // the earlier anchor's frame), measured with `variance`, predicted as
+  // |RoadStepPrediction| from the step and the kept road. With it goes the
+  // road-height pseudo-measurement pi^T t = 0 (sigma road_height_rel_sigma,
+  // as in Update): a coasting road otherwise drifts through pi^T t, and s
+  // would carry the drift into the step length. Standard EKF update over the
+  // whole state (S = H P H^T + Q, K by LLT, Joseph form, symmetrised) with
+  // Q = diag(variance + (road_step_rel_sigma s)^2, road_height_rel_sigma^2).
+  // Refused (report->road_step_updated false, state unchanged) when s's
+  // squared normalised innovation exceeds road_step_gate_chi2, when s is
+  // more than road_step_max_rel_change off its prediction, or when q's
+  // direction is more than road_reid_max_angle_deg off the kept road's (not
+  // the road). Taken, it counts as an observation of the road (PinScale's
+  // "established" planes). Nothing happens without a road in the state.
+  // FailedPrecondition before Initialize; InvalidArgument for a non-finite
+  // or zero q or a non-positive variance; Internal when S is not positive
+  // definite.
+  Status UpdateRoadStep(const Eigen::Vector3d& q, double variance, UpdateReport* report);
 
   // The filter plane an observation's track id refers to: the id itself, or
   // the kept road's id when that observation's track was re-identified as it.
@@ -272,6 +327,18 @@ class PlaneEkf {
   // road): c = pi_road^T t, with dc/dt = pi_road^T and dc/dpi_road = t^T.
   static double RoadHeightChange(const Eigen::Vector3d& pi_road, const Eigen::Vector3d& t,
                                  Eigen::RowVector3d* d_t, Eigen::RowVector3d* d_pi);
+
+  // |t| pi_e (UpdateRoadStep measures its length) predicted from the step
+  // (R, t) and the road's pi in the later camera: pi_e = R pi / c with c = 1 +
+  // (R pi)^T t (the inverse of TransitionPlane), so with a = R pi
+  //   h = |t| a / c,
+  //   dh/dt = a t^T / (|t| c) - |t| a a^T / c^2,
+  //   dh/dpi = |t| R / c - |t| a t^T R / c^2,
+  //   dh/ddtheta = -|t| R [pi]x / c + |t| a t^T R [pi]x / c^2
+  // (R = R_hat Exp(dtheta), so da/ddtheta = -R [pi]x).
+  static Eigen::Vector3d RoadStepPrediction(const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
+                                            const Eigen::Vector3d& pi, Eigen::Matrix3d* d_theta,
+                                            Eigen::Matrix3d* d_t, Eigen::Matrix3d* d_pi);
 
   // The motion measurement's prediction error for a step (R, t) against a
   // measured (R_m, u_m = direction of t_m), and (optionally) its Jacobian
