@@ -85,6 +85,7 @@ v1::PipelineOptions PipelineOptionsToProto(const PipelineOptions& o) {
   out.set_anchors_only(!o.frame_poses.enabled);
   out.set_window_refine(o.window_refine);
   out.set_motion_only_steps(o.motion_only_steps);
+  out.set_road_from_frames(o.road_from_frames);
   out.set_init_max_baseline_s(o.init_max_baseline_s);
   out.set_track_max_baseline_s(o.track_max_baseline_s);
   out.set_refine_window_anchors(o.refine.window_anchors);
@@ -115,6 +116,7 @@ PipelineOptions PipelineOptionsFromProto(const v1::PipelineOptions& p) {
   // Unset / 0 = the core struct's defaults.
   if (p.has_window_refine()) o.window_refine = p.window_refine();
   if (p.has_motion_only_steps()) o.motion_only_steps = p.motion_only_steps();
+  if (p.has_road_from_frames()) o.road_from_frames = p.road_from_frames();
   if (p.has_init_max_baseline_s()) o.init_max_baseline_s = p.init_max_baseline_s();
   if (p.has_track_max_baseline_s()) o.track_max_baseline_s = p.track_max_baseline_s();
   if (p.refine_window_anchors() > 0) o.refine.window_anchors = p.refine_window_anchors();

@@ -36,6 +36,7 @@ void ExpectSameCarried(const PipelineOptions& a, const PipelineOptions& b) {
   EXPECT_EQ(a.frame_poses.estimator.min_inliers, b.frame_poses.estimator.min_inliers);
   EXPECT_EQ(a.window_refine, b.window_refine);
   EXPECT_EQ(a.motion_only_steps, b.motion_only_steps);
+  EXPECT_EQ(a.road_from_frames, b.road_from_frames);
   EXPECT_EQ(a.init_max_baseline_s, b.init_max_baseline_s);
   EXPECT_EQ(a.track_max_baseline_s, b.track_max_baseline_s);
   EXPECT_EQ(a.refine.window_anchors, b.refine.window_anchors);
@@ -88,6 +89,12 @@ TEST(PipelineOptionsRoundTrip, WindowRefine) {
   PipelineOptions m;
   m.motion_only_steps = !PipelineOptions{}.motion_only_steps;
   ExpectRoundTrips(m);
+  // The road from the frames: the same.
+  EXPECT_FALSE(p.has_road_from_frames());
+  EXPECT_EQ(api::PipelineOptionsFromProto(p).road_from_frames, PipelineOptions{}.road_from_frames);
+  PipelineOptions rf;
+  rf.road_from_frames = !PipelineOptions{}.road_from_frames;
+  ExpectRoundTrips(rf);
   p.set_refine_window_anchors(31);
   EXPECT_EQ(api::ValidatePipelineOptions(p).code(), StatusCode::kInvalidArgument);
   // The road-attitude prior: unset is the struct's default, 0 (off) is

@@ -96,6 +96,11 @@ void AddTrackingFlags(CommandLine* command_line, PipelineOptions* options) {
                  "(PipelineOptions::motion_only_steps)")
       ->type_name("BOOL")
       ->capture_default_str();
+  app.add_option("--road-from-frames", options->road_from_frames,
+                 "B-frame streams: measure the road from the B frames next to the earlier anchor "
+                 "where the anchor pair does not show it (PipelineOptions::road_from_frames)")
+      ->type_name("BOOL")
+      ->capture_default_str();
   app.add_option("--min-pair-span-s", options->merge.min_pair_span_s,
                  "IPPP streams: chain P frames until an anchor pair spans at least this long; "
                  "0 = one pair per P frame (MergeOptions::min_pair_span_s)")

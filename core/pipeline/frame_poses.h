@@ -137,6 +137,8 @@ class FramePoser {
   // The poses of the buffered frames strictly between the pair's anchors, in
   // display order; drops the buffered frames up to the later anchor.
   std::vector<FramePose> PoseBetween(const PosedAnchorPair& posed);
+  // The frames buffered since the last pair closed, in display order.
+  const std::deque<FrameRecord>& buffered() const { return frames_; }
   // The pair closed without a tracked pose: drops the frames up to it.
   void Skip(int64_t later_index);
   void Reset();

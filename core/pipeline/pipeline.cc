@@ -10,6 +10,7 @@
 #include "core/common/plane.h"
 #include "core/common/road.h"
 #include "core/common/timing.h"
+#include "core/estimators/road_step.h"
 
 namespace slapse {
 namespace {
@@ -272,6 +273,11 @@ void Pipeline::Advance(const FrontEndStep& front, const std::vector<PlaneObserva
       front.infinity->has_motion) {
     s = ekf_.UpdateMotion(front.infinity->later_from_earlier.Inverse(), &step->ekf);
   }
+  // The road not observed (coasting, or not in the filter): from the frames.
+  if (s.ok() && options_.road_from_frames &&
+      (step->ekf.road_coasting || !ekf_.RoadInEarlierCamera().has_value())) {
+    s = UpdateRoadFromFrames(front, &step->ekf);
+  }
   if (!s.ok()) {
     // Numerical failure: restart the filter on a later pair; the trajectory
     // continues from the last pose at the last step's speed (InitialStepLength).
@@ -281,6 +287,48 @@ void Pipeline::Advance(const FrontEndStep& front, const std::vector<PlaneObserva
   }
   world_from_cam_ = world_from_cam_ * ekf_.prev_from_cur();
   step->tracking = true;
+}
+
+Status Pipeline::UpdateRoadFromFrames(const FrontEndStep& front, UpdateReport* report) {
+  const AnchorPair& pair = front.pair;
+  const double dt_s = pair.later_timestamp_s - pair.earlier_timestamp_s;
+  // The road's fit rests on the step's rotation and direction of travel: on
+  // a step without a motion measurement they are the motion model's guess,
+  // and on a 320x240 highway drive the fitted step length followed its drift
+  // (36 % short after 2 s; ATE 0.45 -> 1.84 %).
+  const bool has_motion = front.infinity.ok() && front.infinity->has_motion;
+  if (pair.n_b <= 0 || !(dt_s > 0) || !has_motion) return Status::Ok();
+  std::vector<InterFrameVector> vectors;
+  for (const FrameRecord& frame : frame_poser_.buffered()) {
+    if (frame.index <= pair.earlier_index || frame.index >= pair.later_index) continue;
+    const double fraction = (frame.timestamp_s - pair.earlier_timestamp_s) / dt_s;
+    if (frame.type != PictureType::kB || frame.corrupt || !frame.reference_certain ||
+        frame.prev_anchor_index != pair.earlier_index || !(fraction > 0.0) ||
+        fraction > kRoadFromFramesMaxFraction) {
+      continue;
+    }
+    for (const MotionVector& mv : frame.mvs) {
+      if (mv.direction != RefDirection::kPast) continue;
+      const Eigen::Vector2d x(mv.x_px, mv.y_px);
+      vectors.push_back({x, x + Eigen::Vector2d(mv.dx_px, mv.dy_px), fraction});
+    }
+  }
+  const Rigid3d step = ekf_.prev_from_cur();
+  if (vectors.empty() || !(step.translation.norm() > 0)) return Status::Ok();
+  StatusOr<RoadStepReport> road = EstimateRoadStep(
+      vectors, intrinsics_, step.R(), step.translation.normalized(), options_.road_step);
+  if (!road.ok()) return road.status();
+  if (!road->success) return Status::Ok();
+  if (!ekf_.RoadInEarlierCamera().has_value()) {
+    if (ekf_.AddRoadFromStep(road->q, road->q_cov, kRoadFromFramesTrackId + roads_from_frames_)) {
+      ++roads_from_frames_;
+      report->road_added_from_frames = true;
+    }
+    return Status::Ok();
+  }
+  // The filter takes q's length: its variance is q_cov along q.
+  const Eigen::Vector3d along = road->q.normalized();
+  return ekf_.UpdateRoadStep(road->q, along.dot(road->q_cov * along), report);
 }
 
 void Pipeline::RecordPlanes(const PipelineStep& step, const AnchorPair& pair) {
@@ -349,13 +397,23 @@ void Pipeline::ApplyScale(double s) {
 
 PoseQuality Pipeline::AnchorQuality(const PipelineStep& step) const {
   PoseQuality q;
+  // PipelineOptions::road_from_frames measured the step's length.
+  const bool road = step.ekf.road_step_updated;
+  const std::string road_source =
+      "the road in the B frames next to the earlier anchor (road_from_frames)";
   q.kind = step.ekf.skipped ? PoseKind::kCoasting : PoseKind::kAnchor;
-  if (step.ekf.skipped) q.note = "no tracked plane observed: the motion model's prediction";
+  if (step.ekf.skipped) {
+    q.note = "no tracked plane observed: the motion model's prediction";
+    if (road) q.note += ", its step length corrected by " + road_source;
+  } else if (road) {
+    q.note = "step length also from " + road_source;
+  }
   if (step.motion_only()) {
     q.kind = PoseKind::kMotionOnly;
     q.note =
         "no tracked plane observed: rotation and direction of travel from the pair's motion, "
-        "step length from the motion model";
+        "step length from " +
+        (road ? road_source : std::string("the motion model"));
   }
   // The step translation's covariance (error state [dtheta, dt, ...]).
   const Eigen::MatrixXd& P = ekf_.covariance();

@@ -20,6 +20,7 @@
 #include "core/common/status.h"
 #include "core/common/timed_pose.h"
 #include "core/ekf/plane_ekf.h"
+#include "core/estimators/road_step.h"
 #include "core/merge/mv_merge.h"
 #include "core/mv/frame_record.h"
 #include "core/pipeline/frame_poses.h"
@@ -106,6 +107,18 @@ struct PipelineOptions : FrontEndOptions {
   // the motion model's. Such anchors are PoseKind::kMotionOnly. Off: such
   // pairs wait ("no plane extracted") or coast, as the paper's method does.
   bool motion_only_steps = true;
+  // The road from the frames between the anchors (docs/METHOD.md, the
+  // section of that name; wire: PipelineOptions.road_from_frames, flag
+  // --road-from-frames). In a stream with B frames, a step that observed no
+  // road (the anchors' vectors lost it: at speed the near road moves beyond
+  // the encoder's search over the anchor span) measures it from the past
+  // vectors of the B frames in the first kRoadFromFramesMaxFraction of the
+  // pair (core/estimators/road_step.h): the step length over the road's
+  // distance updates the kept road and the step (PlaneEkf::UpdateRoadStep),
+  // or the road joins the filter where it has none
+  // (PlaneEkf::AddRoadFromStep). Off: such steps coast on the motion model.
+  bool road_from_frames = true;
+  RoadStepOptions road_step;
   // Poses of the frames between anchors (core/pipeline/frame_poses.h).
   FramePoserOptions frame_poses;
   // Sliding-window refinement of the last anchors' poses and the planes they
@@ -302,6 +315,15 @@ class Pipeline {
   // Predicts and updates the running filter (a numerical failure resets it).
   void Advance(const FrontEndStep& front, const std::vector<PlaneObservation>& observations,
                double dt_s, PipelineStep* step);
+  // PipelineOptions::road_from_frames for a step whose update observed no
+  // road: the B frames within kRoadFromFramesMaxFraction of the pair's span
+  // after its earlier anchor (B1 and B2 of IBBBP: one- and two-frame
+  // vectors) measure it. A road added so takes the track id
+  // kRoadFromFramesTrackId + the number added before (extraction numbers
+  // its planes from 0). Errors are the filter's numerical failures.
+  static constexpr double kRoadFromFramesMaxFraction = 0.55;
+  static constexpr int kRoadFromFramesTrackId = 1 << 30;
+  Status UpdateRoadFromFrames(const FrontEndStep& front, UpdateReport* report);
   // The first step's length when the filter starts: on re-initialisation the
   // last step's speed times dt_s, else from the scale source (may set metric_).
   double InitialStepLength(double dt_s);
@@ -352,6 +374,7 @@ class Pipeline {
   size_t poses_forgotten_ = 0, anchors_forgotten_ = 0, planes_forgotten_ = 0;
   double first_pose_s_ = -1.0;   // the first tracked anchor's time (-1: none yet)
   bool scale_given_up_ = false;  // kCameraHeight: road_deadline_s passed while up to scale
+  int roads_from_frames_ = 0;    // roads added by UpdateRoadFromFrames (their track ids)
 };
 
 }  // namespace slapse
