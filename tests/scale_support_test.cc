@@ -25,6 +25,25 @@ TEST(ScaleSupportTest, CountsOnlyPlaneMeasuredStepsAsHeld) {
   EXPECT_EQ(s.Summary(), "planes measured 70 % of the 10 anchor steps");
 }
 
+// A MOTION_ONLY or COASTING step whose length the road in the B frames
+// measured counts as measured, and the summary says how many those were; an
+// ANCHOR step with it is measured once.
+TEST(ScaleSupportTest, StepsTheRoadInTheFramesMeasuredAreHeld) {
+  ScaleSupport s;
+  s.Count(PoseKind::kAnchor, true);
+  s.Count(PoseKind::kAnchor);
+  s.Count(PoseKind::kMotionOnly, true);
+  s.Count(PoseKind::kCoasting, true);
+  s.Count(PoseKind::kMotionOnly);
+  EXPECT_EQ(s.anchor_steps, 5);
+  EXPECT_EQ(s.plane_steps, 4);
+  EXPECT_EQ(s.road_frame_steps, 2);
+  EXPECT_FALSE(s.Weak());
+  EXPECT_EQ(s.Summary(),
+            "planes measured 80 % of the 5 anchor steps (2 of them the road in the B frames next "
+            "to the earlier anchor)");
+}
+
 TEST(ScaleSupportTest, AWeakShareSaysTheScaleFollowsTheMotionModel) {
   ScaleSupport s;
   s.Count(PoseKind::kAnchor);

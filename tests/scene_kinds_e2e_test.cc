@@ -75,10 +75,11 @@ void ExpectTracks(const DriveResult& r, double max_ate_frac, double max_eps_D,
   EXPECT_TRUE(r.metric[kScaleSpeed]);
   EXPECT_LT(std::abs(r.scale_error[kScaleFirstStep]), 0.5);
   // The run's scale support counts each tracked step once, as its anchor
-  // pose's kind says (the first pose is no step).
+  // pose's kind says (the first pose is no step), and the steps the road in
+  // the B frames measured.
   EXPECT_EQ(r.scale_support.anchor_steps, r.tracked_pairs);
-  EXPECT_EQ(r.scale_support.plane_steps,
-            r.tracked_pairs - r.motion_only_anchors - r.coasting_anchors);
+  EXPECT_EQ(r.scale_support.plane_steps, r.tracked_pairs - r.motion_only_anchors -
+                                             r.coasting_anchors + r.scale_support.road_frame_steps);
 }
 
 // A kind that has no plane for long stretches: it tracks (as ExpectTracks)
@@ -116,8 +117,11 @@ TEST(SceneKindsEndToEndTest, Avenue) {
 // eps_D 3.0 %. Without motion-only steps neither initialised.
 TEST(SceneKindsEndToEndTest, RuralWithoutPlanes) {
   const DriveResult r = ExpectTracksWithoutPlanes(SceneKind::kRural, 3);
-  // No plane measured a step (0 %): the run says its scale is the motion model's.
-  EXPECT_TRUE(r.scale_support.Weak()) << r.scale_support.Summary();
+  // No plane of an anchor pair measured a step; the road in the B frames
+  // did (RoadFromFramesMeasuresTheSteps below: without it the run says its
+  // scale is the motion model's).
+  EXPECT_GT(r.scale_support.road_frame_steps, 0);
+  EXPECT_EQ(r.scale_support.plane_steps, r.scale_support.road_frame_steps);
 }
 // The road from the frames between the anchors (PipelineOptions::
 // road_from_frames) on MPEG-2 IBBBP drives whose anchor pairs never show a
@@ -135,6 +139,9 @@ TEST(SceneKindsEndToEndTest, RoadFromFramesMeasuresTheSteps) {
   ASSERT_TRUE(rural.evaluated && rural_off.evaluated);
   EXPECT_LT(rural.ate_m, 0.01 * rural.distance_m);
   EXPECT_LT(rural.ate_m, 0.3 * rural_off.ate_m);
+  EXPECT_FALSE(rural.scale_support.Weak()) << rural.scale_support.Summary();
+  EXPECT_TRUE(rural_off.scale_support.Weak()) << rural_off.scale_support.Summary();
+  EXPECT_EQ(rural_off.scale_support.road_frame_steps, 0);
   const DriveResult highway = RunSmallDrive(SceneKind::kHighway, 2);
   const DriveResult highway_off = RunSmallDrive(SceneKind::kHighway, 2, off);
   ASSERT_TRUE(highway.evaluated && highway_off.evaluated);

@@ -43,6 +43,10 @@ std::string ScaleSupport::Summary() const {
   std::string out = "planes measured " +
                     std::to_string(static_cast<int>(std::lround(100 * PlaneStepShare()))) +
                     " % of the " + std::to_string(anchor_steps) + " anchor steps";
+  if (road_frame_steps > 0) {
+    out += " (" + std::to_string(road_frame_steps) +
+           " of them the road in the B frames next to the earlier anchor)";
+  }
   if (Weak()) {
     out +=
         ": the remaining steps take their length from the motion model (constant speed), so "

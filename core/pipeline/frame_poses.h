@@ -68,23 +68,29 @@ struct PoseQuality {
 
 // How much of a trajectory's length the planes measured: a run can be told
 // good from bad by it (docs/TRAJECTORY.md "Scale support"). An anchor step
-// whose filter update observed a tracked plane (PoseKind::kAnchor) has its
-// length measured; a COASTING or MOTION_ONLY one takes it from the motion
-// model (constant speed), so where those dominate the scale drifts with the
-// speed. On the 48 tuning drives the runs with planes under
-// kMinPlaneStepShare of their steps had a median ATE of 0.68 % of the
-// distance and eps_D 6.5 % (H.264 IPPP; MPEG-2 IBBBP 0.87 and 4.9 %), the
-// others 0.11 % and 0.9 % (0.12, 0.9 %); the reporting drives split the same
-// way. A held share is no guarantee: the worst held runs reach 1.3-1.5 %.
+// whose filter update observed a tracked plane (PoseKind::kAnchor), or whose
+// length the road in the B frames measured (PipelineOptions::
+// road_from_frames), has its length measured; another COASTING or
+// MOTION_ONLY one takes it from the motion model (constant speed), so where
+// those dominate the scale drifts with the speed. On the 48 tuning drives the runs with planes
+// under kMinPlaneStepShare of their steps had a median ATE of 0.68 % of the distance and eps_D 6.5
+// % (H.264 IPPP; MPEG-2 IBBBP 0.87 and 4.9 %), the others 0.11 % and 0.9 % (0.12, 0.9 %); the
+// reporting drives split the same way. A held share is no guarantee: the worst held runs
+// reach 1.3-1.5 %.
 struct ScaleSupport {
   static constexpr double kMinPlaneStepShare = 0.7;
   int64_t anchor_steps = 0;  // tracked anchor steps (one a tracked pair)
-  int64_t plane_steps = 0;   // of which a plane observation measured (kAnchor)
+  int64_t plane_steps = 0;   // of which a plane measured the length (see above)
+  // Of plane_steps, those only the road in the B frames measured (COASTING
+  // or MOTION_ONLY anchors).
+  int64_t road_frame_steps = 0;
 
-  // Counts one anchor step posed as `kind`.
-  void Count(PoseKind kind) {
+  // Counts one anchor step posed as `kind`, whose length the road in the B
+  // frames measured when `road_in_frames`.
+  void Count(PoseKind kind, bool road_in_frames = false) {
     ++anchor_steps;
-    plane_steps += kind == PoseKind::kAnchor;
+    plane_steps += kind == PoseKind::kAnchor || road_in_frames;
+    road_frame_steps += kind != PoseKind::kAnchor && road_in_frames;
   }
   // plane_steps / anchor_steps (0 without steps).
   double PlaneStepShare() const {

@@ -451,7 +451,7 @@ void Pipeline::AddFramePoses(const AnchorPair& pair, PipelineStep* step) {
   FramePose anchor;
   anchor.pose = later;
   anchor.quality = AnchorQuality(*step);
-  scale_support_.Count(anchor.quality.kind);
+  scale_support_.Count(anchor.quality.kind, step->ekf.road_step_updated);
   step->frame_poses.push_back(anchor);
   poses_.insert(poses_.end(), step->frame_poses.begin(), step->frame_poses.end());
 }
