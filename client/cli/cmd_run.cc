@@ -53,7 +53,8 @@ CsvFile OpenStepsCsv(const std::string& path) {
     std::fprintf(
         csv.get(),
         "later_index,tracking,step_length,kept,filter_planes,updated,added,removed,rejected,"
-        "reassociated,reidentified,road_coasting,rms_residual_px,extracted,note,motion_path\n");
+        "reassociated,reidentified,road_coasting,rms_residual_px,extracted,note,motion_path,"
+        "road_from_frames\n");
   }
   return csv;
 }
@@ -72,12 +73,16 @@ void WriteStepRow(std::FILE* csv, const PipelineStep& s, const std::vector<Timed
                                             traj[traj.size() - 2].world_from_cam.translation)
                                                .norm()
                                          : 0.0;
-  std::fprintf(csv, "%lld,%d,%.4f,%d,%zu,%d,%d,%d,%d,%d,%d,%d,%.3f,%s,\"%s\",%s\n",
+  // road_from_frames: the road in the B frames measured the step, or joined the filter.
+  const char* road = s.ekf.road_step_updated        ? "measured"
+                     : s.ekf.road_added_from_frames ? "added"
+                                                    : "";
+  std::fprintf(csv, "%lld,%d,%.4f,%d,%zu,%d,%d,%d,%d,%d,%d,%d,%.3f,%s,\"%s\",%s,%s\n",
                static_cast<long long>(s.later_index), s.tracking ? 1 : 0, length, s.kept,
                s.planes.size(), s.ekf.planes_updated, s.ekf.planes_added, s.ekf.planes_removed,
                s.ekf.planes_rejected, s.ekf.planes_reassociated, s.ekf.planes_reidentified,
                s.ekf.road_coasting ? 1 : 0, s.ekf.rms_residual_px, extracted.c_str(),
-               s.note.c_str(), PairMotionPathName(s.motion_path));
+               s.note.c_str(), PairMotionPathName(s.motion_path), road);
 }
 
 // The truth in the top-down plot: its path and the facades' footprints on the road.

@@ -181,8 +181,8 @@ struct UpdateReport {
   bool motion_updated = false;
   double motion_chi2 = 0.0;
   // UpdateRoadStep: the road seen from the frames between the anchors was
-  // taken (false: not run, no road, or refused by the gate), and its squared
-  // Mahalanobis innovation.
+  // taken (false: not run, no road, or refused by a gate), and the squared
+  // normalised innovation of its length.
   bool road_step_updated = false;
   double road_step_chi2 = 0.0;
   // The road joined the filter from the frames (PlaneEkf::AddRoadFromStep,
@@ -233,7 +233,8 @@ class PlaneEkf {
   // Adds the road seen from the frames between the anchors where the state
   // has none: q = |t| pi_e (core/estimators/road_step.h) with covariance
   // q_cov gives pi_e = q / |t|, carried into the later camera by
-  // TransitionPlane; its covariance is J_q q_cov J_q^T + J_m P_mm J_m^T and
+  // TransitionPlane; its covariance is J_q (q_cov + (road_step_rel_sigma
+  // |q|)^2 I) J_q^T + J_m P_mm J_m^T and
   // its cross-covariance J_m P_mx (m: dtheta, t), so its scale is the
   // trajectory's. It becomes the road (PlaneTrack::road) under `track_id`.
   // False (nothing added) before Initialize, with a road already kept or

@@ -129,11 +129,10 @@ Status RoadStepOptions::Check(const std::string& who) const {
   if (!(inlier_px > 0.0) || !(iterations >= 1) || !(confidence > 0.0 && confidence < 1.0) ||
       !(road_max_angle_deg > 0.0 && road_max_angle_deg < 90.0) || !(min_inliers >= 3) ||
       !(sigma_px > 0.0) || !(inflation >= 1.0) || !(min_flow_px >= 0.0)) {
-    return InvalidArgumentError(who +
-                                ": inlier_px must be > 0, iterations >= 1, confidence in (0, 1), "
-                                "road_max_angle_deg in "
-                                "(0, 90), min_inliers >= 3, sigma_px > 0, inflation >= 1 and "
-                                "min_flow_px >= 0");
+    return InvalidArgumentError(
+        who +
+        ": inlier_px must be > 0, iterations >= 1, confidence in (0, 1), road_max_angle_deg in "
+        "(0, 90), min_inliers >= 3, sigma_px > 0, inflation >= 1 and min_flow_px >= 0");
   }
   return Status::Ok();
 }
@@ -171,10 +170,12 @@ StatusOr<RoadStepReport> EstimateRoadStep(const std::vector<InterFrameVector>& v
       R_f = ExpSO3(fraction * log_R);
     }
     const Eigen::Vector3d b = R_f * (K_inv * iv.x_frame_px.homogeneous());
-    // Only rays below the camera's horizontal meet a road below it, and a
-    // vector shorter than min_flow_px does not measure the road's depth (the
-    // encoder's default where its search found nothing better, or a point
-    // at the horizon): a plane far away would explain such vectors.
+    // Rays below the earlier camera's optical axis (b_y > 0) only: the road
+    // lies below it (a camera pitched down also sees the far road above its
+    // axis, whose few-pixel flows say little about s). A vector shorter
+    // than min_flow_px does not measure the road's depth (the encoder's
+    // default where its search found nothing better, or a point at the
+    // horizon): a plane far away would explain such vectors.
     const double flow_sq = (iv.x_earlier_px - iv.x_frame_px).squaredNorm();
     if (b.y() > 0.0 && !(flow_sq < options.min_flow_px * options.min_flow_px)) {
       samples.push_back(MakeSample(K, Ku, b, iv.x_earlier_px, iv.fraction));
