@@ -128,8 +128,8 @@ TEST(SceneKindsEndToEndTest, RuralWithoutPlanes) {
 // plane: on the rural road (whose pairs have motion) the step lengths
 // follow the road seen by the B frames next to the earlier anchor instead
 // of the motion model's constant speed: ATE 0.22 % against 2.57 % of the
-// distance. The highway's pairs after the first have no motion measured,
-// so the road is not fitted there (a fit on the predicted motion followed
+// distance. Most of the highway's pairs have no motion measured, so the
+// road is not fitted there (a fit on the predicted motion followed
 // its drift: ATE 1.84 % against 0.45 %): the same run with and without.
 TEST(SceneKindsEndToEndTest, RoadFromFramesMeasuresTheSteps) {
   PipelineOptions off;
