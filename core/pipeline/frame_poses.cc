@@ -64,7 +64,7 @@ FramePoser::FramePoser(const Intrinsics& intrinsics, double sigma_px, FramePoser
       mb_rows_(MbCount(intrinsics.height_px)) {}
 
 void FramePoser::Buffer(const FrameRecord& frame) {
-  if (!options_.enabled) return;
+  if (!options_.enabled && !options_.keep_frames) return;
   FrameRecord kept;  // everything but the luma
   kept.index = frame.index;
   kept.timestamp_s = frame.timestamp_s;
@@ -155,6 +155,10 @@ std::vector<FramePoseObservation> FramePoser::Observe(const FrameRecord& frame,
 
 std::vector<FramePose> FramePoser::PoseBetween(const PosedAnchorPair& posed) {
   std::vector<FramePose> out;
+  if (!options_.enabled) {  // frames kept for their vectors only (keep_frames)
+    Skip(posed.later.index);
+    return out;
+  }
   const TimedPose& a = posed.earlier;
   const TimedPose& b = posed.later;
   std::map<int, Plane3d> planes_world;

@@ -118,6 +118,9 @@ struct FramePose {
 
 struct FramePoserOptions {
   bool enabled = true;  // false: frames between anchors get no pose at all
+  // Buffer the frames (buffered()) even when not `enabled`: the pipeline
+  // sets it for PipelineOptions::road_from_frames. Not on the wire.
+  bool keep_frames = false;
   FramePoseOptions estimator;
   Status Check(const std::string& who = "FramePoserOptions") const {
     return estimator.Check(who + ".estimator");

@@ -56,6 +56,14 @@ bool HandBack(FrontEnd* front_end, const FrontEndStep& front, double dt_s, doubl
          front_end->ExtendBaseline(front.pair);
 }
 
+// The frame poser's options: it keeps the frames for the road from the
+// frames too, with or without frame poses.
+FramePoserOptions FramePoserFor(const PipelineOptions& options) {
+  FramePoserOptions o = options.frame_poses;
+  o.keep_frames = o.keep_frames || options.road_from_frames;
+  return o;
+}
+
 }  // namespace
 
 bool Pipeline::ExtendWhileTracking(const FrontEndStep& front, double dt_s) {
@@ -72,7 +80,7 @@ Pipeline::Pipeline(const Intrinsics& intrinsics, double sigma_px, PipelineOption
       front_end_(intrinsics, sigma_px, options),
       ekf_(intrinsics, options.ekf),
       refiner_(intrinsics, options.refine),
-      frame_poser_(intrinsics, sigma_px, options.frame_poses) {}
+      frame_poser_(intrinsics, sigma_px, FramePoserFor(options)) {}
 
 StatusOr<std::optional<PipelineStep>> Pipeline::Push(const FrameRecord& frame) {
   if (frame.index <= last_index_) {
