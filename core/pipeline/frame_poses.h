@@ -72,11 +72,12 @@ struct PoseQuality {
 // length the road in the B frames measured (PipelineOptions::
 // road_from_frames), has its length measured; another COASTING or
 // MOTION_ONLY one takes it from the motion model (constant speed), so where
-// those dominate the scale drifts with the speed. On the 48 tuning drives the runs with planes
-// under kMinPlaneStepShare of their steps had a median ATE of 0.68 % of the distance and eps_D 6.5
-// % (H.264 IPPP; MPEG-2 IBBBP 0.87 and 4.9 %), the others 0.11 % and 0.9 % (0.12, 0.9 %); the
-// reporting drives split the same way. A held share is no guarantee: the worst held runs
-// reach 1.3-1.5 %.
+// those dominate the scale drifts with the speed. On the 48 tuning drives
+// the runs with planes under kMinPlaneStepShare of their steps had a median
+// ATE of 0.68 % of the distance and eps_D 6.5 % (H.264 IPPP; MPEG-2 IBBBP
+// 0.87 and 4.9 %), the others 0.11 % and 0.9 % (0.12, 0.9 %); the reporting
+// drives split the same way. A held share is no guarantee: the worst held
+// runs reach 1.3-1.5 %.
 struct ScaleSupport {
   static constexpr double kMinPlaneStepShare = 0.7;
   int64_t anchor_steps = 0;  // tracked anchor steps (one a tracked pair)
