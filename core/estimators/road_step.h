@@ -2,10 +2,10 @@
 // road's distance, from the short-span vectors of those frames.
 //
 // Why: in an IBBBP stream the anchors are four frames apart, and at speed
-// the near road moves beyond the encoder's search between them (over the
-// tuning drives' MPEG-2 road blocks: 10 % of the four-frame vectors within
-// 2 px of the truth where the true flow is 32-64 px, 64 % of the one-frame
-// ones; `bench/mv_accuracy --span 1|4`). The road is then not extracted from
+// the near road moves beyond the encoder's search between them (on a 30 fps
+// MPEG-2 rural drive: 10 % of the road's four-frame vectors within 2 px of
+// the truth where the true flow is 32-64 px, 64 % of its one-frame ones;
+// `bench/mv_accuracy --span 1|4`). The road is then not extracted from
 // the anchor pair, the filter coasts on it and the step length is the
 // motion model's. The B frames next to the earlier anchor still follow the
 // road: their past vectors span one or two frames.
