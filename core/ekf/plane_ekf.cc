@@ -133,6 +133,21 @@ EkfState PlaneEkf::Retract(const EkfState& x, const Eigen::VectorXd& delta) {
   return y;
 }
 
+void PlaneEkf::ApplyErrorStep(const Eigen::VectorXd& delta) {
+  R_ = R_ * ExpSO3(delta.segment<3>(kTheta));
+  t_ += delta.segment<3>(kT);
+  w_ += delta.segment<3>(kW);
+  v_ += delta.segment<3>(kV);
+  for (size_t i = 0; i < planes_.size(); ++i) planes_[i].pi += delta.segment<3>(PlaneOffset(i));
+}
+
+void PlaneEkf::JosephCovarianceUpdate(const Eigen::MatrixXd& K, const Eigen::MatrixXd& H,
+                                      const Eigen::MatrixXd& Q) {
+  const Eigen::MatrixXd I_KH = Eigen::MatrixXd::Identity(P_.rows(), P_.cols()) - K * H;
+  P_ = I_KH * P_ * I_KH.transpose() + K * Q * K.transpose();
+  Symmetrize(&P_);
+}
+
 Status PlaneEkf::Predict(double dt_s) {
   if (!initialized_) return FailedPreconditionError("EKF not initialised");
   if (!(dt_s > 0)) return InvalidArgumentError("EKF prediction needs dt_s > 0");
@@ -662,11 +677,7 @@ Status PlaneEkf::IteratedUpdate(const std::vector<TrackedObservation>& tracked, 
       restore_prior();
       return InternalError("EKF update diverged (non-finite step); update skipped");
     }
-    R_ = R_ * ExpSO3(delta.segment<3>(kTheta));
-    t_ += delta.segment<3>(kT);
-    w_ += delta.segment<3>(kW);
-    v_ += delta.segment<3>(kV);
-    for (size_t i = 0; i < planes_.size(); ++i) planes_[i].pi += delta.segment<3>(PlaneOffset(i));
+    ApplyErrorStep(delta);
     rep->rms_residual_px = count > 0 ? std::sqrt(sq_sum / count) : 0.0;
     if (delta.norm() < 1e-10) break;
   }
@@ -787,15 +798,11 @@ Status PlaneEkf::UpdateMotion(const Rigid3d& measured_prev_from_cur, UpdateRepor
   // term each time (|t + dt_perp| > |t|), a slow scale drift. Their lengths
   // are kept.
   const double t_norm = t_.norm(), v_norm = v_.norm();
-  R_ = R_ * ExpSO3(delta.segment<3>(kTheta));
-  t_ = (t_ + delta.segment<3>(kT)).normalized() * t_norm;
-  w_ += delta.segment<3>(kW);
-  const Eigen::Vector3d v_new = v_ + delta.segment<3>(kV);
-  if (v_new.norm() > 0) v_ = v_new.normalized() * v_norm;
-  for (size_t i = 0; i < planes_.size(); ++i) planes_[i].pi += delta.segment<3>(PlaneOffset(i));
-  const Eigen::MatrixXd I_KH = Eigen::MatrixXd::Identity(n, n) - K * H;
-  P_ = I_KH * P_ * I_KH.transpose() + K * Eigen::MatrixXd(Qm) * K.transpose();
-  Symmetrize(&P_);
+  const Eigen::Vector3d v_before = v_;
+  ApplyErrorStep(delta);
+  t_ = t_.normalized() * t_norm;
+  v_ = v_.norm() > 0 ? Eigen::Vector3d(v_.normalized() * v_norm) : v_before;
+  JosephCovarianceUpdate(K, H, Eigen::MatrixXd(Qm));
   report->motion_updated = true;
   return Status::Ok();
 }
@@ -821,8 +828,8 @@ std::optional<Eigen::Vector3d> PlaneEkf::RoadInEarlierCamera() const {
   return RoadStepPrediction(R_, t_, planes_[road].pi, nullptr, nullptr, nullptr) / t_.norm();
 }
 
-bool PlaneEkf::AddRoadFromStep(const Eigen::Vector3d& q, const Eigen::Matrix3d& q_cov,
-                               int track_id) {
+bool PlaneEkf::AddRoadFromStep(const Eigen::Vector3d& q, const Eigen::Matrix3d& q_cov, int track_id,
+                               UpdateReport* report) {
   const double L = t_.norm();
   if (!initialized_ || options_.road_coast_updates <= 0 || RoadIndex() >= 0 || !(L > 0) ||
       !q.allFinite() || !q_cov.allFinite()) {
@@ -858,6 +865,7 @@ bool PlaneEkf::AddRoadFromStep(const Eigen::Vector3d& q, const Eigen::Matrix3d& 
   track.observations = 1;
   track.road = true;
   planes_.push_back(track);
+  if (report != nullptr) report->road_added_from_frames = true;
   return true;
 }
 
@@ -913,14 +921,8 @@ Status PlaneEkf::UpdateRoadStep(const Eigen::Vector3d& q, double variance, Updat
   const Eigen::MatrixXd K = llt.solve(PHt.transpose()).transpose();  // P H^T S^-1
   const Eigen::VectorXd delta = K * r;
   if (!delta.allFinite()) return InternalError("EKF road step update diverged (non-finite step)");
-  R_ = R_ * ExpSO3(delta.segment<3>(kTheta));
-  t_ += delta.segment<3>(kT);
-  w_ += delta.segment<3>(kW);
-  v_ += delta.segment<3>(kV);
-  for (size_t i = 0; i < planes_.size(); ++i) planes_[i].pi += delta.segment<3>(PlaneOffset(i));
-  const Eigen::MatrixXd I_KH = Eigen::MatrixXd::Identity(n, n) - K * H;
-  P_ = I_KH * P_ * I_KH.transpose() + K * Q * K.transpose();
-  Symmetrize(&P_);
+  ApplyErrorStep(delta);
+  JosephCovarianceUpdate(K, H, Q);
   report->road_step_updated = true;
   ++planes_[road].observations;
   return Status::Ok();

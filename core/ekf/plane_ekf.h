@@ -185,8 +185,7 @@ struct UpdateReport {
   // normalised innovation of its length.
   bool road_step_updated = false;
   double road_step_chi2 = 0.0;
-  // The road joined the filter from the frames (PlaneEkf::AddRoadFromStep,
-  // set by the pipeline).
+  // AddRoadFromStep: the road joined the filter from the frames.
   bool road_added_from_frames = false;
   // The factor the state's lengths were rescaled by to pin the scale (1: none).
   double scale_correction = 1.0;
@@ -239,8 +238,10 @@ class PlaneEkf {
   // trajectory's. It becomes the road (PlaneTrack::road) under `track_id`.
   // False (nothing added) before Initialize, with a road already kept or
   // road_coast_updates = 0, a track id in use, a step without translation,
-  // or a plane that is not road-like.
-  bool AddRoadFromStep(const Eigen::Vector3d& q, const Eigen::Matrix3d& q_cov, int track_id);
+  // or a plane that is not road-like. Sets report->road_added_from_frames
+  // when it adds the road (report may be null).
+  bool AddRoadFromStep(const Eigen::Vector3d& q, const Eigen::Matrix3d& q_cov, int track_id,
+                       UpdateReport* report = nullptr);
 
   // Updates the state with the road seen from the frames between the anchors
   // (core/estimators/road_step.h): q = |t| pi_e, of which the filter takes
@@ -355,6 +356,12 @@ class PlaneEkf {
   static constexpr int kMotionDim = 12;
   int PlaneOffset(size_t index) const { return kMotionDim + 3 * static_cast<int>(index); }
   void RemovePlane(size_t index);
+  // The updates' step on the nominal state, in place: x (+) delta as
+  // Retract does it (the error state's layout, right perturbation on SO(3)).
+  void ApplyErrorStep(const Eigen::VectorXd& delta);
+  // P+ = (I - K H) P (I - K H)^T + K Q K^T (Joseph form), symmetrised.
+  void JosephCovarianceUpdate(const Eigen::MatrixXd& K, const Eigen::MatrixXd& H,
+                              const Eigen::MatrixXd& Q);
   bool AddPlane(const PlaneObservation& obs);
   // The plane of a new observation given the current motion (Gauss-Newton on
   // its transfer errors from the linear least-squares start), with the normal

@@ -281,11 +281,7 @@ void Pipeline::Advance(const FrontEndStep& front, const std::vector<PlaneObserva
       front.infinity->has_motion) {
     s = ekf_.UpdateMotion(front.infinity->later_from_earlier.Inverse(), &step->ekf);
   }
-  // The road not observed (coasting, or not in the filter): from the frames.
-  if (s.ok() && options_.road_from_frames &&
-      (step->ekf.road_coasting || !ekf_.RoadInEarlierCamera().has_value())) {
-    s = UpdateRoadFromFrames(front, &step->ekf);
-  }
+  if (s.ok() && options_.road_from_frames) s = UpdateRoadFromFrames(front, &step->ekf);
   if (!s.ok()) {
     // Numerical failure: restart the filter on a later pair; the trajectory
     // continues from the last pose at the last step's speed (InitialStepLength).
@@ -305,7 +301,11 @@ Status Pipeline::UpdateRoadFromFrames(const FrontEndStep& front, UpdateReport* r
   // and on a 320x240 highway drive the fitted step length followed its drift
   // (36 % short after 2 s; ATE 0.45 -> 1.84 %).
   const bool has_motion = front.infinity.ok() && front.infinity->has_motion;
-  if (pair.n_b <= 0 || !(dt_s > 0) || !has_motion) return Status::Ok();
+  // Only where the road was not observed: coasting, or not in the filter.
+  const bool road_kept = ekf_.RoadInEarlierCamera().has_value();
+  if ((road_kept && !report->road_coasting) || pair.n_b <= 0 || !(dt_s > 0) || !has_motion) {
+    return Status::Ok();
+  }
   std::vector<InterFrameVector> vectors;
   for (const FrameRecord& frame : frame_poser_.buffered()) {
     if (frame.index <= pair.earlier_index || frame.index >= pair.later_index) continue;
@@ -327,11 +327,9 @@ Status Pipeline::UpdateRoadFromFrames(const FrontEndStep& front, UpdateReport* r
       vectors, intrinsics_, step.R(), step.translation.normalized(), options_.road_step);
   if (!road.ok()) return road.status();
   if (!road->success) return Status::Ok();
-  if (!ekf_.RoadInEarlierCamera().has_value()) {
-    if (ekf_.AddRoadFromStep(road->q, road->q_cov, kRoadFromFramesTrackId + roads_from_frames_)) {
-      ++roads_from_frames_;
-      report->road_added_from_frames = true;
-    }
+  if (!road_kept) {
+    roads_from_frames_ += ekf_.AddRoadFromStep(road->q, road->q_cov,
+                                               kRoadFromFramesTrackId + roads_from_frames_, report);
     return Status::Ok();
   }
   // The filter takes q's length: its variance is q_cov along q.
