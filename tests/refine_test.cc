@@ -409,6 +409,7 @@ TEST(WindowRefinerTest, OptionsCheck) {
   const std::vector<std::function<void(WindowRefinerOptions*)>> bad = {
       [](WindowRefinerOptions* o) { o->window_anchors = 2; },
       [](WindowRefinerOptions* o) { o->huber_k = 0; },
+      [](WindowRefinerOptions* o) { o->metric_gauge_step_rel_sigma = 0; },
       [](WindowRefinerOptions* o) { o->road_attitude_sigma_deg = -1.0; },
       [](WindowRefinerOptions* o) { o->road_level_rel_sigma = -0.01; },
       [](WindowRefinerOptions* o) { o->road_reference_solves = 0; },

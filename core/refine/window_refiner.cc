@@ -152,11 +152,12 @@ struct PoseBlock {
 
 Status WindowRefinerOptions::Check(const std::string& who) const {
   if (window_anchors < 3 || max_iterations < 1 || max_mbs_per_plane < 4 || !(extra_sigma_px > 0) ||
-      !(huber_k > 0) || !(gauge_step_rel_sigma > 0) || !(road_height_rel_sigma > 0) ||
-      !(speed_change_rel_per_sqrt_s > 0) || !(angular_rate_change_rad_s_per_sqrt_s > 0) ||
-      !(road_attitude_sigma_deg >= 0) || !(road_level_rel_sigma >= 0) ||
-      road_reference_solves < 1 || !(reassociate_max_angle_deg > 0) ||
-      !(reassociate_max_distance_ratio > 1) || !(max_final_rms > 0)) {
+      !(huber_k > 0) || !(gauge_step_rel_sigma > 0) || !(metric_gauge_step_rel_sigma > 0) ||
+      !(road_height_rel_sigma > 0) || !(speed_change_rel_per_sqrt_s > 0) ||
+      !(angular_rate_change_rad_s_per_sqrt_s > 0) || !(road_attitude_sigma_deg >= 0) ||
+      !(road_level_rel_sigma >= 0) || road_reference_solves < 1 ||
+      !(reassociate_max_angle_deg > 0) || !(reassociate_max_distance_ratio > 1) ||
+      !(max_final_rms > 0)) {
     return InvalidArgumentError(who +
                                 ": window_anchors must be >= 3, max_iterations >= 1, "
                                 "max_mbs_per_plane >= 4, road_reference_solves >= 1, every sigma "
@@ -418,9 +419,11 @@ void WindowRefiner::AddGaugeAndPriors(Problem* problem, size_t first, WindowRefi
   const Eigen::Vector3d& c0 = wp.poses[first].c;
   const double length = (wp.poses[first + 1].c - c0).norm();
   if (length > 0) {
-    wp.Add(new ceres::AutoDiffCostFunction<StepLengthResidual, 1, 3>(
-               new StepLengthResidual(c0, length, options_.gauge_step_rel_sigma)),
-           {wp.poses[first + 1].c.data()});
+    wp.Add(
+        new ceres::AutoDiffCostFunction<StepLengthResidual, 1, 3>(new StepLengthResidual(
+            c0, length,
+            metric_height_ ? options_.metric_gauge_step_rel_sigma : options_.gauge_step_rel_sigma)),
+        {wp.poses[first + 1].c.data()});
   }
   // (c) the road's height, once it took part in a solve (or is metric), (f)
   // the cameras' level above it, and
