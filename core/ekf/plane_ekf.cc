@@ -799,7 +799,20 @@ Status PlaneEkf::UpdateMotion(const Rigid3d& measured_prev_from_cur, UpdateRepor
   // are kept.
   const double t_norm = t_.norm(), v_norm = v_.norm();
   const Eigen::Vector3d v_before = v_;
+  const EkfState before{R_, t_, w_, v_, {}};
+  const std::vector<PlaneTrack> planes_before = planes_;
   ApplyErrorStep(delta);
+  // The residual is a sine: tens of degrees out, one linear step can turn t
+  // past the measured direction (a 10 fps drive's step predicted at 16 deg
+  // and measured at 64 deg went to 160 deg: the car driving backwards, and
+  // every later measurement refused as reversed). Such a step is refused.
+  const Eigen::Vector3d& u_m = measured_prev_from_cur.translation;
+  const double off_before_deg = AngleBetweenDeg(before.t, u_m);
+  if (AngleBetweenDeg(t_, before.t) > off_before_deg || AngleBetweenDeg(t_, u_m) > off_before_deg) {
+    R_ = before.R, t_ = before.t, w_ = before.w, v_ = before.v;
+    planes_ = planes_before;
+    return Status::Ok();
+  }
   t_ = t_.normalized() * t_norm;
   v_ = v_.norm() > 0 ? Eigen::Vector3d(v_.normalized() * v_norm) : v_before;
   JosephCovarianceUpdate(K, H, Eigen::MatrixXd(Qm));

@@ -220,7 +220,9 @@ class PlaneEkf {
   // r^T S^-1 r > motion_gate_chi2 is refused (report->motion_updated false,
   // state unchanged), and so is a direction more than 90 deg off the
   // predicted one (the residual, a sine, shrinks past 90 deg; motion_chi2 is
-  // then infinite). FailedPrecondition before Initialize; InvalidArgument
+  // then infinite), and so is an update whose linear step would turn t past
+  // the measured direction or away from it (tens of degrees out, where the
+  // sine is far from linear). FailedPrecondition before Initialize; InvalidArgument
   // for a non-finite measurement or one without translation; Internal when S
   // is not positive definite.
   Status UpdateMotion(const Rigid3d& measured_prev_from_cur, UpdateReport* report);
