@@ -793,12 +793,6 @@ Status PlaneEkf::UpdateMotion(const Rigid3d& measured_prev_from_cur, UpdateRepor
   const Eigen::MatrixXd K = llt.solve(PHt.transpose()).transpose();  // P H^T S^-1
   const Eigen::VectorXd delta = K * r;
   if (!delta.allFinite()) return InternalError("EKF motion update diverged (non-finite step)");
-  // The measurement has no length: the update turns t (and, through their
-  // correlation, v) but its linear step would lengthen them by a second-order
-  // term each time (|t + dt_perp| > |t|), a slow scale drift. Their lengths
-  // are kept.
-  const double t_norm = t_.norm(), v_norm = v_.norm();
-  const Eigen::Vector3d v_before = v_;
   const EkfState before{R_, t_, w_, v_, {}};
   const std::vector<PlaneTrack> planes_before = planes_;
   ApplyErrorStep(delta);
@@ -813,8 +807,12 @@ Status PlaneEkf::UpdateMotion(const Rigid3d& measured_prev_from_cur, UpdateRepor
     planes_ = planes_before;
     return Status::Ok();
   }
-  t_ = t_.normalized() * t_norm;
-  v_ = v_.norm() > 0 ? Eigen::Vector3d(v_.normalized() * v_norm) : v_before;
+  // The measurement has no length: the update turns t (and, through their
+  // correlation, v) but its linear step would lengthen them by a second-order
+  // term each time (|t + dt_perp| > |t|), a slow scale drift. Their lengths
+  // are kept.
+  t_ = t_.normalized() * before.t.norm();
+  v_ = v_.norm() > 0 ? Eigen::Vector3d(v_.normalized() * before.v.norm()) : before.v;
   JosephCovarianceUpdate(K, H, Eigen::MatrixXd(Qm));
   report->motion_updated = true;
   return Status::Ok();
