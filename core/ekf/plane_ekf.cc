@@ -793,26 +793,26 @@ Status PlaneEkf::UpdateMotion(const Rigid3d& measured_prev_from_cur, UpdateRepor
   const Eigen::MatrixXd K = llt.solve(PHt.transpose()).transpose();  // P H^T S^-1
   const Eigen::VectorXd delta = K * r;
   if (!delta.allFinite()) return InternalError("EKF motion update diverged (non-finite step)");
-  const EkfState before{R_, t_, w_, v_, {}};
-  const std::vector<PlaneTrack> planes_before = planes_;
-  ApplyErrorStep(delta);
   // The residual is a sine: tens of degrees out, one linear step can turn t
   // past the measured direction (a 10 fps drive's step predicted at 16 deg
   // and measured at 64 deg went to 160 deg: the car driving backwards, and
   // every later measurement refused as reversed). Such a step is refused.
   const Eigen::Vector3d& u_m = measured_prev_from_cur.translation;
-  const double off_before_deg = AngleBetweenDeg(before.t, u_m);
-  if (AngleBetweenDeg(t_, before.t) > off_before_deg || AngleBetweenDeg(t_, u_m) > off_before_deg) {
-    R_ = before.R, t_ = before.t, w_ = before.w, v_ = before.v;
-    planes_ = planes_before;
+  const Eigen::Vector3d t_stepped = t_ + delta.segment<3>(kT);  // t after ApplyErrorStep
+  const double off_before_deg = AngleBetweenDeg(t_, u_m);
+  if (AngleBetweenDeg(t_stepped, t_) > off_before_deg ||
+      AngleBetweenDeg(t_stepped, u_m) > off_before_deg) {
     return Status::Ok();
   }
+  const double t_norm = t_.norm(), v_norm = v_.norm();
+  const Eigen::Vector3d v_before = v_;
+  ApplyErrorStep(delta);
   // The measurement has no length: the update turns t (and, through their
   // correlation, v) but its linear step would lengthen them by a second-order
   // term each time (|t + dt_perp| > |t|), a slow scale drift. Their lengths
   // are kept.
-  t_ = t_.normalized() * before.t.norm();
-  v_ = v_.norm() > 0 ? Eigen::Vector3d(v_.normalized() * before.v.norm()) : before.v;
+  t_ = t_.normalized() * t_norm;
+  v_ = v_.norm() > 0 ? Eigen::Vector3d(v_.normalized() * v_norm) : v_before;
   JosephCovarianceUpdate(K, H, Eigen::MatrixXd(Qm));
   report->motion_updated = true;
   return Status::Ok();
