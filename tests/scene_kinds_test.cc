@@ -103,7 +103,8 @@ TEST_P(SceneKindTest, ValidGeometryAndGroundTruth) {
     double from_speed = 0.0;
     for (size_t i = 0; i < path.world_from_cam.size(); ++i) {
       const Eigen::Vector3d& c = path.world_from_cam[i].translation;
-      EXPECT_DOUBLE_EQ(c.z(), path.camera_height_m);
+      // The drawn height plus the suspension's bounce (SimulateOptions::bounce_m).
+      EXPECT_NEAR(c.z(), path.camera_height_m, o.bounce_m + 1e-12);
       double s = 0, l = 0;
       sc.centreline.Project(c.head<2>(), &s, &l);
       EXPECT_LT(std::abs(l), sc.road.half_width_m) << "frame " << i << " off the asphalt";
@@ -250,6 +251,8 @@ TEST(DriveTableTest, FixedSplitCoveringEveryKindRateAndSize) {
       EXPECT_LE(-d.sim.pitch_down_min_deg, 5.0);
       EXPECT_GE(d.sim.min_speed_mps * 3.6, 10.0 - 1e-9);
       EXPECT_LE(d.sim.max_speed_mps * 3.6, 100.0 + 1e-9);
+      EXPECT_GE(d.sim.bounce_m, 0.005);  // every drive's camera bounces, by up to 3 cm
+      EXPECT_LE(d.sim.bounce_m, 0.03);
       EXPECT_TRUE(d.sim.appearance_variety);
     }
     EXPECT_EQ(n, 24);

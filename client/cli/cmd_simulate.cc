@@ -88,6 +88,10 @@ struct SimulateFlags {
     app.add_option("--pitch-deg", pitch_deg,
                    "fixed camera pitch, up positive (default: drawn from -5..-2 deg)")
         ->type_name("DEG");
+    app.add_option("--bounce-m", opt.bounce_m,
+                   "peak vertical bounce of the camera on the car's suspension")
+        ->type_name("M")
+        ->capture_default_str();
     app.add_option("--supersampling", supersampling, "anti-aliasing samples per pixel and axis")
         ->type_name("N")
         ->capture_default_str();
@@ -127,7 +131,7 @@ Status SimulateFlags::Apply(const CommandLine& cl) {
   opt.scene_kind = *kind;
   for (const Status& s :
        {CheckRange("supersampling", supersampling, int64_t{1}, int64_t{4}),
-        CheckRange("blur-px", opt.blur_px, 0, 5),
+        CheckRange("blur-px", opt.blur_px, 0, 5), CheckRange("bounce-m", opt.bounce_m, 0, 0.2),
         CheckRange("sensor-noise", opt.sensor_noise, 0, 50),
         cl.Has("camera-height-m") ? CheckRange("camera-height-m", camera_height_m, 0.3, 10)
                                   : Status::Ok(),

@@ -365,7 +365,8 @@ std::string DriveResultsCsv(const std::vector<DriveResult>& results) {
          "height,"
          "scale_err_height,metric_speed,scale_err_speed,metric_first_step,scale_err_first_step,"
          "camera_height_m,pitch_down_deg,simulate_s,evaluate_s,note,motion_only_anchors,coasting_"
-         "anchors,extended_pairs,plane_step_share,height_road_depression_deg,full_motion_fits\n";
+         "anchors,extended_pairs,plane_step_share,height_road_depression_deg,full_motion_fits,"
+         "bounce_m\n";
   for (const DriveResult& r : results) {
     const SimulateOptions& o = r.spec.sim;
     std::string note = r.note;
@@ -384,7 +385,8 @@ std::string DriveResultsCsv(const std::vector<DriveResult>& results) {
     csv << "," << o.camera_height_min_m << "," << o.pitch_down_min_deg << "," << r.simulate_s << ","
         << r.evaluate_s << ",\"" << note << "\"," << r.motion_only_anchors << ","
         << r.coasting_anchors << "," << r.extended_pairs << "," << r.scale_support.PlaneStepShare()
-        << "," << r.height_road_depression_deg << "," << r.full_motion_fits << "\n";
+        << "," << r.height_road_depression_deg << "," << r.full_motion_fits << "," << o.bounce_m
+        << "\n";
   }
   return csv.str();
 }

@@ -63,6 +63,8 @@ DriveSpec MakeDriveSpec(SceneKind kind, int seed) {
   o.supersampling = std::min(1 + (seed + 2 * k) % 3, r.width > 640 ? 2 : 3);
   o.blur_px = rng.Bernoulli(0.5) ? rng.Uniform(0.3, 0.8) : 0.0;
   o.sensor_noise = rng.Uniform(0.0, 2.5);
+  // The body's bounce on its suspension: from a smooth highway to a rough lane.
+  o.bounce_m = rng.Uniform(0.005, 0.03);
   return d;
 }
 

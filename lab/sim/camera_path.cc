@@ -73,8 +73,9 @@ StatusOr<CameraPath> GenerateCameraPath(const Scene& scene, const PathOptions& o
   }
   if (!(o.camera_height_min_m > 0 && o.camera_height_max_m >= o.camera_height_min_m) ||
       !(o.pitch_down_max_deg >= o.pitch_down_min_deg) || !(o.vibration_deg >= 0) ||
-      !(o.heading_smoothing_m > 0)) {
-    return InvalidArgumentError("bad camera height / pitch / vibration / smoothing options");
+      !(o.bounce_m >= 0 && o.bounce_m < o.camera_height_min_m) || !(o.heading_smoothing_m > 0)) {
+    return InvalidArgumentError(
+        "bad camera height / pitch / vibration / bounce / smoothing options");
   }
   const Centreline& cl = scene.centreline;
   if (cl.segments().empty()) return FailedPreconditionError("scene has no centreline");
@@ -89,6 +90,10 @@ StatusOr<CameraPath> GenerateCameraPath(const Scene& scene, const PathOptions& o
   const Sinusoids speed = MakeSinusoids(rng, 2, 0.9 * v_half, 5.0, 16.0);
   const Sinusoids pitch_vib = MakeSinusoids(rng, 3, o.vibration_deg * kDeg, 0.33, 1.25);
   const Sinusoids roll_vib = MakeSinusoids(rng, 3, 0.7 * o.vibration_deg * kDeg, 0.33, 1.25);
+  // The bounce draws from its own stream, so the draws above (and every
+  // drive's path but its height) do not depend on it.
+  SimRandom bounce_rng(Mix64(o.seed ^ 0x424F554E4345ULL));
+  const Sinusoids bounce = MakeSinusoids(bounce_rng, 3, o.bounce_m, 0.4, 1.5);
   const double lane = scene.lane_offset_m;
 
   // ds/dt along the centreline for a car on the lane at lateral offset `lane`:
@@ -115,7 +120,7 @@ StatusOr<CameraPath> GenerateCameraPath(const Scene& scene, const PathOptions& o
   // The camera at time t and arc length s.
   auto pose_at = [&](double t, double s) {
     const Eigen::Vector2d p = cl.Offset(s, lane);
-    const Eigen::Vector3d pos(p.x(), p.y(), path.camera_height_m);
+    const Eigen::Vector3d pos(p.x(), p.y(), path.camera_height_m + bounce(t));
     const double heading = (cl.HeadingIntegral(s + w) - cl.HeadingIntegral(s - w)) / (2.0 * w);
     const Eigen::Matrix3d r =
         WorldFromCamRotation(heading, path.pitch_down_deg * kDeg + pitch_vib(t), roll_vib(t));

@@ -24,6 +24,9 @@ StatusOr<Drive> PrepareDrive(const SimulateOptions& o) {
     return InvalidArgumentError(
         "camera height must be within 0.3..10 m and pitch within -30..30 deg");
   }
+  if (!(o.bounce_m >= 0 && o.bounce_m <= 0.2 && o.bounce_m < o.camera_height_min_m)) {
+    return InvalidArgumentError("bounce_m must be in [0, 0.2] m and below the camera height");
+  }
   if (!(o.blur_px >= 0 && o.blur_px <= 5 && o.sensor_noise >= 0 && o.sensor_noise <= 50)) {
     return InvalidArgumentError("blur_px must be in [0, 5] and sensor_noise in [0, 50]");
   }
@@ -40,6 +43,7 @@ StatusOr<Drive> PrepareDrive(const SimulateOptions& o) {
   path.camera_height_max_m = o.camera_height_max_m;
   path.pitch_down_min_deg = o.pitch_down_min_deg;
   path.pitch_down_max_deg = o.pitch_down_max_deg;
+  path.bounce_m = o.bounce_m;
   path.half_frame_poses = o.encoder.interlaced;  // the bottom fields' instants
 
   SceneOptions scene = SceneOptionsFor(o.scene_kind);

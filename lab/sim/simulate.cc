@@ -49,6 +49,7 @@ Status WriteMeta(const SimulateOptions& o, const EncoderOptions& eo, const Drive
   meta["supersampling"] = o.supersampling;
   meta["camera_height_m"] = drive.path.camera_height_m;
   meta["pitch_down_deg"] = drive.path.pitch_down_deg;
+  meta["bounce_m"] = o.bounce_m;
   meta["distance_m"] = drive.path.distance_m;
   meta["num_planes"] = drive.scene.planes.size();
   meta["render_s"] = report.render_s;

@@ -39,6 +39,8 @@ struct SimulateOptions {
   // up), each drawn uniformly from its range by the path's seed.
   double camera_height_min_m = 1.3, camera_height_max_m = 1.6;
   double pitch_down_min_deg = 2.0, pitch_down_max_deg = 5.0;
+  // Peak vertical bounce of the camera on the car's suspension (PathOptions::bounce_m).
+  double bounce_m = PathOptions().bounce_m;
   // The camera's optics and sensor after rendering: a Gaussian blur (sigma,
   // output pixels; 0: none) and additive Gaussian noise per pixel and channel
   // (sigma, 8-bit levels; 0: none; seeded per frame from the seed).
