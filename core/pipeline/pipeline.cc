@@ -121,6 +121,7 @@ void Pipeline::Break() {
 void Pipeline::ResetFilter() {
   ekf_ = PlaneEkf(intrinsics_, options_.ekf);
   refiner_.Reset();
+  road_measured_steps_ = 0;
 }
 
 PipelineStep Pipeline::Process(const FrontEndStep& front) {
@@ -523,9 +524,12 @@ void Pipeline::MaybeFixScaleFromWindowRoad(PipelineStep* step) {
   const WindowRefineReport& r = step->refine;
   if (!(r.solved && r.road_in_window && r.road_pairs >= sc.road_min_window_pairs &&
         r.road_distance > 0)) {
+    if (MaybeFixScaleFromMeasuredRoad(step)) return;
     step->scale_note = "metric scale not observable yet: the road plane is seen in " +
                        std::to_string(r.road_pairs) + " of " + std::to_string(r.anchors - 1) +
-                       " window pairs (needs " + std::to_string(sc.road_min_window_pairs) + ")";
+                       " window pairs (needs " + std::to_string(sc.road_min_window_pairs) +
+                       ") and measured on " + std::to_string(road_measured_steps_) +
+                       " steps in a row";
     return;
   }
   ApplyScale(sc.camera_height_m / r.road_distance);
@@ -536,6 +540,35 @@ void Pipeline::MaybeFixScaleFromWindowRoad(PipelineStep* step) {
       road.value_or(Eigen::Vector3d::Zero()),
       "camera height over the road seen in " + std::to_string(r.road_pairs) + " window pairs",
       step);
+}
+
+bool Pipeline::MaybeFixScaleFromMeasuredRoad(PipelineStep* step) {
+  const ScaleOptions& sc = options_.scale;
+  const PlaneTrack* road = nullptr;
+  for (const PlaneTrack& track : ekf_.planes()) {
+    if (track.road) road = &track;
+  }
+  // Measured on this step: observed by the pair's update, or its step length
+  // measured in the B frames (UpdateRoadFromFrames).
+  const UpdateReport& u = step->ekf;
+  const bool measured = road != nullptr && (u.road_step_updated || u.road_added_from_frames ||
+                                            (u.planes_updated > 0 && road->missed_updates == 0));
+  road_measured_steps_ = measured ? road_measured_steps_ + 1 : 0;
+  if (!measured || road_measured_steps_ < sc.road_min_window_pairs ||
+      road->observations < sc.road_min_observations ||
+      !IsRoadLike(road->pi, CameraDown(), sc.road_max_angle_deg)) {
+    return false;
+  }
+  // Road: pi ~ (0, 1/h, 0) at the trajectory's scale, so the camera height h
+  // is 1 / |pi|.
+  ApplyScale(sc.camera_height_m * road->pi.norm());
+  refiner_.SetRoadHeight(sc.camera_height_m);
+  metric_ = true;
+  NoteHeightFix(road->pi,
+                "camera height over the filter's road, measured on " +
+                    std::to_string(road_measured_steps_) + " steps in a row",
+                step);
+  return true;
 }
 
 void Pipeline::NoteHeightFix(const Eigen::Vector3d& road_pi_cam, const std::string& how,

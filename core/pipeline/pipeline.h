@@ -49,8 +49,11 @@ struct ScaleOptions {
   double road_max_angle_deg = 25.0;
   // With the window refiner (PipelineOptions::window_refine) the height is
   // read from the road plane refined jointly over the window, once at least
-  // this many of the window's pairs observed it; until then the step's
-  // scale_note says the metric scale is not observable yet.
+  // this many of the window's pairs observed it -- or from the filter's road
+  // once it has been measured (by a pair, or by its step in the B frames)
+  // on this many steps in a row and `road_min_observations` times in all;
+  // until then the step's scale_note says the metric scale is not
+  // observable yet.
   int road_min_window_pairs = 3;
   // kCameraHeight: stream seconds after the first pose within which the road
   // must fix the scale. Past it the run stays up to scale for good (the
@@ -353,6 +356,12 @@ class Pipeline {
   void RefineWindow(const AnchorPair& pair, PipelineStep* step);
   // kCameraHeight with the refiner: the scale from the window's road plane.
   void MaybeFixScaleFromWindowRoad(PipelineStep* step);
+  // kCameraHeight with the refiner, where the window does not see the road
+  // in enough pairs (MPEG-2 at 10 fps: the anchor pairs rarely extract it):
+  // the scale from the filter's road once it has been measured -- by a
+  // pair's update or by its step in the B frames -- on
+  // road_min_window_pairs steps in a row. Counts the steps; true if fixed.
+  bool MaybeFixScaleFromMeasuredRoad(PipelineStep* step);
 
   Intrinsics intrinsics_;
   PipelineOptions options_;
@@ -364,6 +373,7 @@ class Pipeline {
   bool finishing_ = false;                   // in Finish: no more extensions
   Rigid3d world_from_cam_;
   bool metric_ = false;
+  int road_measured_steps_ = 0;  // MaybeFixScaleFromMeasuredRoad's run of steps
   std::optional<double> height_road_depression_deg_;
   std::vector<TimedPose> trajectory_;
   ScaleSupport scale_support_;
