@@ -797,6 +797,9 @@ Status PlaneEkf::UpdateMotion(const Rigid3d& measured_prev_from_cur, UpdateRepor
   // past the measured direction (a 10 fps drive's step predicted at 16 deg
   // and measured at 64 deg went to 160 deg: the car driving backwards, and
   // every later measurement refused as reversed). Such a step is refused.
+  // (Its overshoot comes from the step's part along t, which the measurement
+  // does not see and the length restore below discards; dropping it before
+  // the step instead was measured in docs/TRAJECTORY.md "Session 34".)
   const Eigen::Vector3d& u_m = measured_prev_from_cur.translation;
   const Eigen::Vector3d t_stepped = t_ + delta.segment<3>(kT);  // t after ApplyErrorStep
   const double off_before_deg = AngleBetweenDeg(t_, u_m);
