@@ -259,7 +259,9 @@ class PlaneEkf {
   // squared normalised innovation exceeds road_step_gate_chi2, when s is
   // more than road_step_max_rel_change off its prediction, or when q's
   // direction is more than road_reid_max_angle_deg off the kept road's (not
-  // the road). Taken, it counts as an observation of the road (PinScale's
+  // the road), or when the update would move |t| against s's innovation
+  // (s measured shorter, t lengthened: only the state's correlations do
+  // that). Taken, it counts as an observation of the road (PinScale's
   // "established" planes). Nothing happens without a road in the state.
   // FailedPrecondition before Initialize; InvalidArgument for a non-finite
   // or zero q or a non-positive variance; Internal when S is not positive
