@@ -110,7 +110,7 @@ TEST(SceneKindsEndToEndTest, Avenue) {
   ExpectTracks(r, 0.05, 0.12);
   EXPECT_FALSE(r.scale_support.Weak()) << r.scale_support.Summary();  // planes on 83-91 %
 }
-// Measured: rural 90 of 90 frames posed from 0 s, ATE 0.24 %, eps_D 4.1 %
+// Measured: rural 90 of 90 frames posed from 0 s, ATE 0.23 %, eps_D 4.3 %
 // (2.6 % and 5.0 % without the road from the frames, below);
 // highway 74 of 90 from 0.53 s (its first 4 pairs have no reliable motion:
 // 4 untracked pairs allowed, all within the first second), ATE 0.58 %,
@@ -127,13 +127,13 @@ TEST(SceneKindsEndToEndTest, RuralWithoutPlanes) {
 // road_from_frames) on MPEG-2 IBBBP drives whose anchor pairs never show a
 // plane: on the rural road (whose pairs have motion) the step lengths
 // follow the road seen by the B frames next to the earlier anchor instead
-// of the motion model's constant speed: ATE 0.24 % against 2.57 % of the
+// of the motion model's constant speed: ATE 0.23 % against 2.57 % of the
 // distance. Most of the highway's pairs have no motion measured, so the
 // road is not fitted there (a fit on the predicted motion followed
 // its drift: ATE 1.84 % against 0.45 %): the same run with and without.
 // The rural road measured in the frames also places a camera height's
 // metric scale (Pipeline::MaybeFixScaleFromMeasuredRoad: the window never
-// sees it in an anchor pair): measured 0.8 % off; without the stage the run
+// sees it in an anchor pair): measured 0.5 % off; without the stage the run
 // stays up to scale and says so.
 TEST(SceneKindsEndToEndTest, RoadFromFramesMeasuresTheSteps) {
   PipelineOptions off;
