@@ -181,9 +181,9 @@ TEST(SceneKindsEndToEndTest, Intersection) {
 
 // A braking urban drive at 10 fps (the evaluation's tuning drive urban-9 as
 // it is: 640x480, 5 s): the road is measured in the B frames on most steps.
-// Right after two new facades' first update, one such measurement (13 %
+// Right after a new facade's first update, one such measurement (13 %
 // short) lengthened the step by 22 % through the filter's correlations and
-// put the road 64 % farther; the scale kept that jump (ATE 3.25 %, eps_D
+// put the road 51 % farther; the scale kept that jump (ATE 3.25 %, eps_D
 // 6.7 %). Refused (PlaneEkf::UpdateRoadStep): ATE 0.84 %, eps_D 2.1 %.
 TEST(SceneKindsEndToEndTest, BrakingUrbanDriveKeepsItsScaleWhenFacadesChange) {
   const DriveSpec urban9 = MakeDriveSpec(SceneKind::kUrban, 9);

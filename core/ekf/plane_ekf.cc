@@ -938,8 +938,8 @@ Status PlaneEkf::UpdateRoadStep(const Eigen::Vector3d& q, double variance, Updat
   // The measurement says the step is longer or shorter against the road's
   // distance than predicted (r(0)). A step that moves |t| the other way can
   // only come from the state's correlations, not from this measurement: on
-  // a braking 10 fps drive, right after two new facades' first update, a
-  // measurement 13 % short lengthened t by 22 % and put the road 64 %
+  // a braking 10 fps drive, right after a new facade's first update, a
+  // measurement 13 % short lengthened t by 22 % and put the road 51 %
   // farther away, and the scale kept the jump (urban-9: ATE 3.25 %, 0.84 %
   // with the refusal; docs/TRAJECTORY.md "Session 34"). Such a step is
   // refused.
