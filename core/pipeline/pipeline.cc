@@ -379,11 +379,16 @@ void Pipeline::MaybeFixScaleFromRoad(PipelineStep* step) {
     if (track.observations < sc.road_min_observations || track.coasting()) continue;
     // Road: pi ~ (0, 1/h, 0), so the camera height h is 1 / |pi|.
     if (!IsRoadLike(track.pi, CameraDown(), sc.road_max_angle_deg)) continue;
-    ApplyScale(sc.camera_height_m * track.pi.norm());
-    metric_ = true;
+    FixScaleFromHeight(sc.camera_height_m * track.pi.norm());
     NoteHeightFix(track.pi, "camera height over the filter's road plane", step);
     return;
   }
+}
+
+void Pipeline::FixScaleFromHeight(double s) {
+  ApplyScale(s);
+  refiner_.SetRoadHeight(options_.scale.camera_height_m);
+  metric_ = true;
 }
 
 void Pipeline::ApplyScale(double s) {
@@ -532,9 +537,7 @@ void Pipeline::MaybeFixScaleFromWindowRoad(PipelineStep* step) {
                        " steps in a row";
     return;
   }
-  ApplyScale(sc.camera_height_m / r.road_distance);
-  refiner_.SetRoadHeight(sc.camera_height_m);
-  metric_ = true;
+  FixScaleFromHeight(sc.camera_height_m / r.road_distance);
   const std::optional<Eigen::Vector3d> road = refiner_.RoadInNewest();
   NoteHeightFix(
       road.value_or(Eigen::Vector3d::Zero()),
@@ -561,9 +564,7 @@ bool Pipeline::MaybeFixScaleFromMeasuredRoad(PipelineStep* step) {
   }
   // Road: pi ~ (0, 1/h, 0) at the trajectory's scale, so the camera height h
   // is 1 / |pi|.
-  ApplyScale(sc.camera_height_m * road->pi.norm());
-  refiner_.SetRoadHeight(sc.camera_height_m);
-  metric_ = true;
+  FixScaleFromHeight(sc.camera_height_m * road->pi.norm());
   NoteHeightFix(road->pi,
                 "camera height over the filter's road, measured on " +
                     std::to_string(road_measured_steps_) + " steps in a row",

@@ -340,6 +340,11 @@ class Pipeline {
   void RestartOnNonFinite(const Rigid3d& world_from_cam_before, PipelineStep* step);
   void RecordPlanes(const PipelineStep& step, const AnchorPair& pair);
   void ApplyScale(double s);
+  // kCameraHeight: the scale fixed by a road at the given height (every
+  // source of it): ApplyScale(s), the window's road held at the metric
+  // camera height (WindowRefiner::SetRoadHeight; unused without the
+  // refiner), and the run metric from now on.
+  void FixScaleFromHeight(double s);
   void MaybeFixScaleFromRoad(PipelineStep* step);
   // kCameraHeight, the scale just fixed from the road `road_pi_cam` (the
   // newest camera's): records how steeply the image saw it and says so in
