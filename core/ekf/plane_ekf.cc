@@ -793,8 +793,8 @@ Status PlaneEkf::UpdateMotion(const Rigid3d& measured_prev_from_cur, UpdateRepor
   const Eigen::MatrixXd K = llt.solve(PHt.transpose()).transpose();  // P H^T S^-1
   const Eigen::VectorXd delta = K * r;
   if (!delta.allFinite()) return InternalError("EKF motion update diverged (non-finite step)");
-  // The residual is a sine: tens of degrees out, one linear step can turn t
-  // past the measured direction (a 10 fps drive's step predicted at 16 deg
+  // One linear step can turn t past the measured direction, tens of degrees
+  // out (a 10 fps drive's step predicted at 16 deg
   // and measured at 64 deg went to 160 deg: the car driving backwards, and
   // every later measurement refused as reversed). Such a step is refused.
   // (Its overshoot comes from the step's part along t, which the measurement

@@ -221,8 +221,9 @@ class PlaneEkf {
   // state unchanged), and so is a direction more than 90 deg off the
   // predicted one (the residual, a sine, shrinks past 90 deg; motion_chi2 is
   // then infinite), and so is an update whose linear step would turn t past
-  // the measured direction or away from it (tens of degrees out, where the
-  // sine is far from linear). FailedPrecondition before Initialize; InvalidArgument
+  // the measured direction or away from it (after a taken update, the step's
+  // part along t shortens t while it turns, and the turn about doubles).
+  // FailedPrecondition before Initialize; InvalidArgument
   // for a non-finite measurement or one without translation; Internal when S
   // is not positive definite.
   Status UpdateMotion(const Rigid3d& measured_prev_from_cur, UpdateReport* report);
