@@ -56,24 +56,58 @@ struct RotationOnlyEstimator {
   }
 
   // Residuals with dehom(y_i) computed once per RANSAC run: the run scores a
-  // few hundred models on the same points (ransac.h's ScorerFor).
+  // few hundred models on the same points (ransac.h's ScorerFor). The points
+  // are kept as columns (structure of arrays) and scored two at a time in
+  // Eigen's fixed-size packets, operation for operation as Eigen's
+  // |(R x).hnormalized() - dehom(y)|^2, whose R x sums rows 0-1 as
+  // (r0 x0 + r1 x1) + r2 x2 and row 2 as r0 x0 + (r1 x1 + r2 x2): the same
+  // residuals, bit for bit, at a third of the instructions.
   class Scorer {
    public:
-    Scorer(const std::vector<X_t>& X, const std::vector<Y_t>& Y) : x_(X), y_(Y.size()) {
-      for (size_t i = 0; i < Y.size(); ++i) y_[i] = Y[i].hnormalized();
+    Scorer(const std::vector<X_t>& X, const std::vector<Y_t>& Y) {
+      const size_t n = std::min(X.size(), Y.size());
+      for (std::vector<double>* a : {&x0_, &x1_, &x2_, &y0_, &y1_}) a->resize(n);
+      for (size_t i = 0; i < n; ++i) {
+        x0_[i] = X[i].x();
+        x1_[i] = X[i].y();
+        x2_[i] = X[i].z();
+        const Eigen::Vector2d y = Y[i].hnormalized();
+        y0_[i] = y.x();
+        y1_[i] = y.y();
+      }
     }
     void Residuals(const M_t& R, std::vector<double>* squared_residuals) const {
-      squared_residuals->resize(x_.size());
-      for (size_t i = 0; i < x_.size(); ++i) {
-        const Eigen::Vector3d p = R * x_[i];
-        (*squared_residuals)[i] = p.z() > 1e-12 ? (p.hnormalized() - y_[i]).squaredNorm()
-                                                : std::numeric_limits<double>::infinity();
+      const size_t n = x0_.size();
+      squared_residuals->resize(n);
+      double* out = squared_residuals->data();
+      constexpr double kInfinity = std::numeric_limits<double>::infinity();
+      using Pair = Eigen::Array2d;
+      auto at = [](const std::vector<double>& v, size_t i) {
+        return Eigen::Map<const Pair>(&v[i]);
+      };
+      size_t i = 0;
+      for (; i + 2 <= n; i += 2) {
+        const Pair x0 = at(x0_, i), x1 = at(x1_, i), x2 = at(x2_, i);
+        const Pair px = (R(0, 0) * x0 + R(0, 1) * x1) + R(0, 2) * x2;
+        const Pair py = (R(1, 0) * x0 + R(1, 1) * x1) + R(1, 2) * x2;
+        const Pair pz = R(2, 0) * x0 + (R(2, 1) * x1 + R(2, 2) * x2);
+        const Pair dx = px / pz - at(y0_, i);
+        const Pair dy = py / pz - at(y1_, i);
+        const Pair sq = dx * dx + dy * dy;
+        out[i] = pz(0) > 1e-12 ? sq(0) : kInfinity;
+        out[i + 1] = pz(1) > 1e-12 ? sq(1) : kInfinity;
+      }
+      for (; i < n; ++i) {
+        const double px = (R(0, 0) * x0_[i] + R(0, 1) * x1_[i]) + R(0, 2) * x2_[i];
+        const double py = (R(1, 0) * x0_[i] + R(1, 1) * x1_[i]) + R(1, 2) * x2_[i];
+        const double pz = R(2, 0) * x0_[i] + (R(2, 1) * x1_[i] + R(2, 2) * x2_[i]);
+        const double dx = px / pz - y0_[i], dy = py / pz - y1_[i];
+        out[i] = pz > 1e-12 ? dx * dx + dy * dy : kInfinity;
       }
     }
 
    private:
-    const std::vector<X_t>& x_;
-    std::vector<Eigen::Vector2d> y_;
+    std::vector<double> x0_, x1_, x2_, y0_, y1_;
   };
 };
 
