@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -282,6 +283,51 @@ TEST(MbTextureTest, KnownTensorsFlatStripesAndTwoDimensionalTexture) {
   // A frame whose size is no multiple of 16: partial cells, no read past the plane.
   const auto partial = MbTextureMinEigen(texture.data(), kW, 40, 20);
   EXPECT_EQ(partial.size(), static_cast<size_t>(MbCount(40) * MbCount(20)));
+}
+
+// MbTextureMinEigen against the header's definition, sample by sample, on
+// random images of sizes that end inside a cell (1242 = 77 x 16 + 10, 50 =
+// 3 x 16 + 2: the last sample x = 49 lies in the partial cell only) or on
+// a cell's edge, with a stride wider than the row.
+TEST(MbTextureTest, EqualsTheDefinitionOnRandomImagesOfAnySize) {
+  std::mt19937 rng(17);
+  for (const auto& [w, h] : std::vector<std::pair<int, int>>{
+           {1242, 376}, {640, 480}, {50, 37}, {33, 18}, {17, 17}, {3, 3}, {64, 48}}) {
+    const int stride = w + 7;
+    std::vector<uint8_t> img(static_cast<size_t>(stride) * h);
+    for (uint8_t& v : img) v = static_cast<uint8_t>(rng() & 0xFF);
+    auto at = [&](int x, int y) {
+      return static_cast<int>(img[static_cast<size_t>(y) * stride + x]);
+    };
+    const std::vector<float> got = MbTextureMinEigen(img.data(), stride, w, h);
+    const int cols = MbCount(w), rows = MbCount(h);
+    ASSERT_EQ(got.size(), static_cast<size_t>(cols) * rows);
+    for (int r = 0; r < rows; ++r) {
+      for (int c = 0; c < cols; ++c) {
+        // Sums of gx^2, gx gy, gy^2 over x = 16 c + 1 + 4 i, y = 16 r + 1 + 4 j
+        // inside the cell and the frame; central differences, clamped.
+        long long xx = 0, xy = 0, yy = 0, n = 0;
+        for (int y = 16 * r + 1; y < std::min(h, 16 * r + 16); y += 4) {
+          for (int x = 16 * c + 1; x < std::min(w, 16 * c + 16); x += 4) {
+            const int gx = at(std::min(x + 1, w - 1), y) - at(x - 1, y);
+            const int gy = at(x, std::min(y + 1, h - 1)) - at(x, y - 1);
+            xx += gx * gx;
+            xy += gx * gy;
+            yy += gy * gy;
+            ++n;
+          }
+        }
+        double expected = 0.0;
+        if (n > 0) {
+          const double scale = 1.0 / (4.0 * static_cast<double>(n));
+          const double a = xx * scale, b = xy * scale, d = yy * scale;
+          expected = std::max(0.0, 0.5 * (a + d) - std::sqrt(0.25 * (a - d) * (a - d) + b * b));
+        }
+        EXPECT_FLOAT_EQ(got[static_cast<size_t>(r) * cols + c], static_cast<float>(expected))
+            << w << "x" << h << " cell " << c << "," << r;
+      }
+    }
+  }
 }
 
 // The reader hands out every anchor's texture on the MB grid (a textured pan:
