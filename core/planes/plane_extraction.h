@@ -122,10 +122,19 @@ struct PlaneExtractionOptions {
   // 54.7 / 39.8; one 72.6 / 46.8 and 58.3 / 43.2; three 69.9 / 47.3 and
   // 57.7 / 43.3).
   int refit_iterations = 1;
-  // Discovery gives up after this many consecutive best models whose largest
-  // component is below min_mbs_per_plane (their inliers are set aside for the
-  // rest of the pair and reported as unassigned). 0: stop at the first.
-  int max_failed_discoveries = 2;
+  // Discovery sets aside at most this many consecutive best models whose
+  // largest component is below min_mbs_per_plane (or that the orientation
+  // prior rejects; their inliers are set aside for the rest of the pair and
+  // reported as unassigned) and stops at the next one. 0: stop at the first.
+  // A failing search is discovery's most expensive: its trial count runs to
+  // max_trials_per_plane. 2 -> 1 in session 35: on the 2 Mbit/s H.264
+  // camera stream discovery 0.87 -> 0.69 G instructions (docs/BENCHMARKS.md
+  // "Session 35"); tuning drives (`slapse eval-trajectory --drives tuning`,
+  // ATE median / mean / worst %) mpeg2-ibbbp 0.13 / 0.264 / 1.35 -> 0.13 /
+  // 0.261 / 1.24, h264-ippp 0.10 / 0.175 / 1.62 -> 0.10 / 0.176 / 1.62;
+  // Table I at eps_h 1 px TP 82.6 -> 82.3 %, recall 52.8 -> 52.4 %. 0 saved
+  // 0.43 G but cost MPEG-2 accuracy (mean ATE 0.264 -> 0.282 %).
+  int max_failed_discoveries = 1;
   // With the pair's motion (Process's `motion`), fit planes as 3-parameter
   // homographies H = K (R + t m^T) K^-1 consistent with it
   // (core/estimators/epipolar_plane.h: 3-point samples, planes in front of
