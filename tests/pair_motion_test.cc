@@ -72,6 +72,35 @@ TEST(PairMotionTest, TranslationIsObservedAndTheRotationKeptAsEstimated) {
   EXPECT_NEAR(m->later_from_earlier.translation.norm(), 1.0, 1e-9);
 }
 
+// Without a prior the full path runs. Where E gives the motion, the
+// rotation-only model is polished from E's rotation (no random search); it
+// leaves as many points off it by the parallax threshold (6 px) as the true
+// rotation does. Under a pure rotation the random search decides, as before,
+// and its model is the pair's motion.
+TEST(PairMotionTest, TheFullPathPolishesTheRotationOnlyModelFromEs) {
+  const std::vector<Correspondence> c = Observe(Forward(), 300);
+  auto m = EstimatePairMotion(c, TestIntrinsics(), PairMotionOptions(), 6.0);
+  ASSERT_TRUE(m.ok()) << m.status().ToString();
+  EXPECT_TRUE(m->full_fit);
+  EXPECT_TRUE(m->has_motion);
+  EXPECT_TRUE(m->rotation_only_from_essential);
+  const Eigen::Matrix3d K = TestIntrinsics().K();
+  const Eigen::Matrix3d KRKinv = K * Forward().R() * K.inverse();
+  int off_true_rotation = 0;
+  for (const Correspondence& ci : c) off_true_rotation += RotationOnlyParallaxPx(KRKinv, ci) >= 6.0;
+  EXPECT_GT(off_true_rotation, 50);  // 76 of the 300
+  EXPECT_NEAR(m->num_rotation_outliers, off_true_rotation, 0.05 * off_true_rotation);
+
+  const Rigid3d turn(Eigen::Matrix3d(Eigen::AngleAxisd(DegToRad(3.0), Eigen::Vector3d::UnitY())),
+                     Eigen::Vector3d::Zero());
+  m = EstimatePairMotion(Observe(turn, 300), TestIntrinsics(), PairMotionOptions(), 6.0);
+  ASSERT_TRUE(m.ok()) << m.status().ToString();
+  EXPECT_FALSE(m->has_motion);
+  EXPECT_FALSE(m->rotation_only_from_essential);
+  EXPECT_EQ(m->rotation_source, PairRotationSource::kRotationOnly);
+  EXPECT_NEAR(Eigen::AngleAxisd(m->R_later_from_earlier.transpose() * turn.R()).angle(), 0.0, 1e-4);
+}
+
 TEST(PairMotionTest, TooFewCorrespondencesEstimateNothing) {
   const std::vector<Correspondence> c = Observe(Forward(), 10);
   auto m = EstimatePairMotion(c, TestIntrinsics(), PairMotionOptions(), 6.0);

@@ -125,6 +125,9 @@ struct PairMotionReport {
   // one, docs/BENCHMARKS.md "Session 31"). False on the fast path and when
   // there were too few correspondences to estimate anything.
   bool full_fit = false;
+  // Full path: the rotation-only model was polished from E's rotation (no
+  // random search; see FullPath in pair_motion.cc).
+  bool rotation_only_from_essential = false;
 };
 
 // How a pair's motion was found, for reports.
