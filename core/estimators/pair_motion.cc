@@ -488,8 +488,9 @@ Status FullPath(const MotionProblem& p, PairMotionReport* result) {
   // rotation and its twin of the twisted pair (rotated by pi about t; under
   // a pure rotation E's own choice may be the wrong one), as the fast path
   // polishes it from the refined rotation, instead of the random search
-  // (~1000 hypotheses with few inliers when the camera translates: 8 % of
-  // the instructions of the 10 fps MPEG-2 drive rural-5). Where that model
+  // (up to 2000 hypotheses, each with few inliers when the camera
+  // translates: 7 % of the instructions of the 10 fps MPEG-2 drive rural-5,
+  // docs/BENCHMARKS.md "Session 35"). Where that model
   // says "no motion", or the polish fails, the random search decides as
   // before: the rotation-only model is then the pair's motion.
   RansacReport<Eigen::Matrix3d> rotation;
